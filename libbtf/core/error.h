@@ -1,0 +1,56 @@
+#pragma once
+// One error type for everything a user can cause (bad input, bad options, failed I/O).
+// Programming errors are not reported this way; they are assertions.
+#include <stdexcept>
+#include <string>
+
+#include <fmt/format.h>
+
+namespace btf {
+
+// Process exit codes shared by every tool (docs/errors.md).
+enum class ExitCode : int {
+  kOk = 0,
+  kFailedCheck = 1,  // ran, but a requested check or threshold failed
+  kUsage = 2,        // bad command line or option value
+  kBadInput = 3,     // an input file or value is malformed, inconsistent or unsupported
+  kIo = 4,           // a file could not be read or written
+  kInternal = 5,     // a bug in libbtf: please report it
+  kInterrupted = 130,
+};
+
+class Error : public std::runtime_error {
+ public:
+  Error(ExitCode code, std::string message) : std::runtime_error(std::move(message)), code_(code) {}
+  ExitCode code() const { return code_; }
+
+ private:
+  ExitCode code_;
+};
+
+// Raised when a progress callback asks to stop.
+class Cancelled : public Error {
+ public:
+  Cancelled() : Error(ExitCode::kInterrupted, "cancelled") {}
+};
+
+template <typename... Args>
+[[noreturn]] void ThrowBadInput(fmt::format_string<Args...> f, Args&&... args) {
+  throw Error(ExitCode::kBadInput, fmt::format(f, std::forward<Args>(args)...));
+}
+template <typename... Args>
+[[noreturn]] void ThrowIo(fmt::format_string<Args...> f, Args&&... args) {
+  throw Error(ExitCode::kIo, fmt::format(f, std::forward<Args>(args)...));
+}
+template <typename... Args>
+[[noreturn]] void ThrowUsage(fmt::format_string<Args...> f, Args&&... args) {
+  throw Error(ExitCode::kUsage, fmt::format(f, std::forward<Args>(args)...));
+}
+
+// Option checks: `Check()` methods of XxxOptions call this so the message names the field.
+#define BTF_CHECK_OPTION(cond, field, msg)                                                  \
+  do {                                                                                       \
+    if (!(cond)) ::btf::ThrowUsage("invalid option '{}': {} (required: {})", field, msg, #cond); \
+  } while (0)
+
+}  // namespace btf

@@ -1,0 +1,65 @@
+#pragma once
+// The libbtf dataset file, format "libbtf-dataset" version 1 (normative: docs/format.md).
+#include <filesystem>
+#include <string>
+
+#include "libbtf/core/dataset.h"
+#include "libbtf/io/hdf5.h"
+
+namespace btf {
+
+inline constexpr const char* kDatasetFormat = "libbtf-dataset";
+inline constexpr const char* kDatasetFormatVersion = "1.0.0";
+inline constexpr int kDatasetFormatMajor = 1;
+
+struct DatasetWriteOptions {
+  h5::Storage storage = h5::Storage::kFloat32;  // kFloat16 halves the size (about 3 significant digits)
+  int deflate_level = 4;                        // 0 = no compression, 1..9 = deflate level (with shuffle)
+  std::string creator = "libbtf";               // stored in the root attribute "creator"
+  void Check() const;
+};
+
+// Everything about a dataset file except the texel values.
+struct DatasetHeader {
+  std::string path, format_version, creator, creation_time, storage;
+  int num_views = 0, num_lights = 0, height = 0, width = 0, channels = 0;
+  Sampling views, lights;
+  DatasetInfo info;
+};
+
+// Writes atomically (temporary file + rename).
+void WriteDataset(const std::filesystem::path& path, const Dataset& dataset, const DatasetWriteOptions& options = {});
+Dataset ReadDataset(const std::filesystem::path& path);
+
+// Random access without reading the whole file: one image or one view slot at a time.
+class DatasetReader {
+ public:
+  explicit DatasetReader(const std::filesystem::path& path);
+  const DatasetHeader& header() const { return header_; }
+  // height x width x channels floats.
+  void ReadImage(int view, int light, float* out) const;
+  // lights x height x width x channels floats.
+  void ReadViewSlot(int view, float* out) const;
+
+ private:
+  h5::File file_;
+  DatasetHeader header_;
+};
+
+// Incremental writer: create, write view slots (or images) in any order, then Commit(). Lets
+// producers stream datasets larger than memory. Destroying without Commit() leaves no file.
+class DatasetWriter {
+ public:
+  DatasetWriter(const std::filesystem::path& path, const Sampling& views, const Sampling& lights, int height, int width,
+                int channels, const DatasetInfo& info, const DatasetWriteOptions& options = {});
+  ~DatasetWriter();
+  void WriteImage(int view, int light, const float* data);
+  void WriteViewSlot(int view, const float* data);
+  void Commit();
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace btf

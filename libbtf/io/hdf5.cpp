@@ -1,0 +1,381 @@
+#include "libbtf/io/hdf5.h"
+
+#include <chrono>
+#include <ctime>
+#include <mutex>
+
+#include "libbtf/core/dataset.h"
+#include "libbtf/core/error.h"
+
+namespace btf::h5 {
+
+void SilenceErrors() {
+  static std::once_flag once;
+  std::call_once(once, [] { H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr); });
+}
+
+void Handle::reset() {
+  if (id_ < 0) return;
+  switch (H5Iget_type(id_)) {
+    case H5I_FILE: H5Fclose(id_); break;
+    case H5I_GROUP: H5Gclose(id_); break;
+    case H5I_DATASET: H5Dclose(id_); break;
+    case H5I_DATASPACE: H5Sclose(id_); break;
+    case H5I_DATATYPE: H5Tclose(id_); break;
+    case H5I_ATTR: H5Aclose(id_); break;
+    case H5I_GENPROP_LST: H5Pclose(id_); break;
+    default: break;
+  }
+  id_ = H5I_INVALID_HID;
+}
+
+hid_t HalfType() {
+  static hid_t type = [] {
+    hid_t t = H5Tcopy(H5T_IEEE_F32LE);
+    H5Tset_fields(t, 15, 10, 5, 0, 10);
+    H5Tset_precision(t, 16);
+    H5Tset_size(t, 2);
+    H5Tset_ebias(t, 15);
+    H5Tlock(t);
+    return t;
+  }();
+  return type;
+}
+
+int MajorVersion(const std::string& semver) {
+  std::size_t pos = 0;
+  int major = 0;
+  while (pos < semver.size() && std::isdigit(static_cast<unsigned char>(semver[pos]))) {
+    major = major * 10 + (semver[pos] - '0');
+    if (++pos > 6) return -1;
+  }
+  if (pos == 0 || pos >= semver.size() || semver[pos] != '.') return -1;
+  return major;
+}
+
+File File::Create(const std::filesystem::path& path) {
+  SilenceErrors();
+  File f;
+  f.path_ = path.string();
+  Handle fapl(H5Pcreate(H5P_FILE_ACCESS));
+  // 1.8-compatible object headers: files stay readable by older HDF5 readers.
+  H5Pset_libver_bounds(fapl.id(), H5F_LIBVER_EARLIEST, H5F_LIBVER_V18);
+  f.file_ = Handle(H5Fcreate(f.path_.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, fapl.id()));
+  if (!f.file_.valid()) ThrowIo("cannot create HDF5 file '{}': check the folder exists and is writable", f.path_);
+  return f;
+}
+
+File File::Open(const std::filesystem::path& path) {
+  SilenceErrors();
+  File f;
+  f.path_ = path.string();
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) ThrowIo("cannot open '{}': no such file", f.path_);
+  if (H5Fis_hdf5(f.path_.c_str()) <= 0)
+    ThrowBadInput("'{}' is not an HDF5 file (wrong file, or its header is corrupt)", f.path_);
+  f.file_ = Handle(H5Fopen(f.path_.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT));
+  if (!f.file_.valid())
+    ThrowBadInput("cannot open HDF5 file '{}': the file is truncated or corrupt; re-create or re-copy it", f.path_);
+  return f;
+}
+
+bool File::Exists(const std::string& object) const {
+  if (object == "/") return true;
+  // Check each path component so a missing parent is not an error.
+  std::size_t pos = 0;
+  while ((pos = object.find('/', pos + 1)) != std::string::npos)
+    if (H5Lexists(id(), object.substr(0, pos).c_str(), H5P_DEFAULT) <= 0) return false;
+  return H5Lexists(id(), object.c_str(), H5P_DEFAULT) > 0;
+}
+
+void File::CreateGroup(const std::string& group) const {
+  Handle g(H5Gcreate2(id(), group.c_str(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT));
+  if (!g.valid()) ThrowIo("'{}': cannot create group '{}'", path_, group);
+}
+
+namespace {
+
+Handle OpenObject(const File& f, const std::string& object) {
+  if (!f.Exists(object)) ThrowBadInput("'{}': required item '{}' is missing", f.path(), object);
+  Handle h(H5Oopen(f.id(), object.c_str(), H5P_DEFAULT));
+  if (!h.valid()) ThrowBadInput("'{}': cannot open '{}' (corrupt file?)", f.path(), object);
+  return h;
+}
+
+void WriteAttr(const File& f, const std::string& object, const std::string& name, hid_t type, const void* value) {
+  Handle obj = OpenObject(f, object);
+  if (H5Aexists(obj.id(), name.c_str()) > 0) H5Adelete(obj.id(), name.c_str());
+  Handle space(H5Screate(H5S_SCALAR));
+  Handle attr(H5Acreate2(obj.id(), name.c_str(), type, space.id(), H5P_DEFAULT, H5P_DEFAULT));
+  if (!attr.valid() || H5Awrite(attr.id(), type, value) < 0)
+    ThrowIo("'{}': cannot write attribute '{}' on '{}'", f.path(), name, object);
+}
+
+Handle OpenAttr(const File& f, const std::string& object, const std::string& name) {
+  Handle obj = OpenObject(f, object);
+  if (H5Aexists(obj.id(), name.c_str()) <= 0)
+    ThrowBadInput("'{}': required attribute '{}' on '{}' is missing", f.path(), name, object);
+  Handle attr(H5Aopen(obj.id(), name.c_str(), H5P_DEFAULT));
+  if (!attr.valid()) ThrowBadInput("'{}': cannot open attribute '{}' on '{}'", f.path(), name, object);
+  return attr;
+}
+
+template <typename T>
+T ReadNumericAttr(const File& f, const std::string& object, const std::string& name, hid_t mem_type) {
+  Handle attr = OpenAttr(f, object, name);
+  Handle type(H5Aget_type(attr.id()));
+  const H5T_class_t cls = H5Tget_class(type.id());
+  Handle space(H5Aget_space(attr.id()));
+  if ((cls != H5T_INTEGER && cls != H5T_FLOAT) || H5Sget_simple_extent_npoints(space.id()) != 1)
+    ThrowBadInput("'{}': attribute '{}' on '{}' must be a single number", f.path(), name, object);
+  T v{};
+  if (H5Aread(attr.id(), mem_type, &v) < 0)
+    ThrowBadInput("'{}': cannot read attribute '{}' on '{}'", f.path(), name, object);
+  return v;
+}
+
+Handle StringType(std::size_t size) {
+  Handle t(H5Tcopy(H5T_C_S1));
+  H5Tset_size(t.id(), size > 0 ? size : 1);
+  H5Tset_strpad(t.id(), H5T_STR_NULLPAD);
+  H5Tset_cset(t.id(), H5T_CSET_UTF8);
+  return t;
+}
+
+// Reads a scalar fixed- or variable-length string from an attribute or dataset.
+template <typename ReadFn>
+std::string ReadStringValue(hid_t stored_type, hid_t space, ReadFn read, const std::string& what) {
+  if (H5Tget_class(stored_type) != H5T_STRING || H5Sget_simple_extent_npoints(space) != 1)
+    ThrowBadInput("{} must be a single string", what);
+  if (H5Tis_variable_str(stored_type) > 0) {
+    Handle mem(H5Tcopy(H5T_C_S1));
+    H5Tset_size(mem.id(), H5T_VARIABLE);
+    char* p = nullptr;
+    if (read(mem.id(), &p) < 0) ThrowBadInput("cannot read {}", what);
+    std::string s = p ? p : "";
+    H5free_memory(p);
+    return s;
+  }
+  const std::size_t n = H5Tget_size(stored_type);
+  if (n > (std::size_t(1) << 30)) ThrowBadInput("{} claims an absurd size ({} bytes)", what, n);
+  std::string s(n, '\0');
+  Handle mem = StringType(n);
+  if (read(mem.id(), s.data()) < 0) ThrowBadInput("cannot read {}", what);
+  s.resize(std::strlen(s.c_str()));
+  return s;
+}
+
+}  // namespace
+
+void File::SetAttr(const std::string& object, const std::string& name, const std::string& value) const {
+  Handle type = StringType(value.size());
+  WriteAttr(*this, object, name, type.id(), value.data());
+}
+void File::SetAttr(const std::string& object, const std::string& name, std::int64_t value) const {
+  WriteAttr(*this, object, name, H5T_NATIVE_INT64, &value);
+}
+void File::SetAttr(const std::string& object, const std::string& name, double value) const {
+  WriteAttr(*this, object, name, H5T_NATIVE_DOUBLE, &value);
+}
+bool File::HasAttr(const std::string& object, const std::string& name) const {
+  if (!Exists(object)) return false;
+  Handle obj(H5Oopen(id(), object.c_str(), H5P_DEFAULT));
+  return obj.valid() && H5Aexists(obj.id(), name.c_str()) > 0;
+}
+std::string File::GetString(const std::string& object, const std::string& name) const {
+  Handle attr = OpenAttr(*this, object, name);
+  Handle type(H5Aget_type(attr.id()));
+  Handle space(H5Aget_space(attr.id()));
+  return ReadStringValue(
+      type.id(), space.id(), [&](hid_t mem, void* buf) { return H5Aread(attr.id(), mem, buf); },
+      fmt::format("'{}': attribute '{}' on '{}'", path_, name, object));
+}
+std::int64_t File::GetInt(const std::string& object, const std::string& name) const {
+  return ReadNumericAttr<std::int64_t>(*this, object, name, H5T_NATIVE_INT64);
+}
+double File::GetDouble(const std::string& object, const std::string& name) const {
+  return ReadNumericAttr<double>(*this, object, name, H5T_NATIVE_DOUBLE);
+}
+
+void File::WriteString(const std::string& name, const std::string& text) const {
+  Handle type = StringType(text.size());
+  Handle space(H5Screate(H5S_SCALAR));
+  Handle ds(H5Dcreate2(id(), name.c_str(), type.id(), space.id(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT));
+  if (!ds.valid() || H5Dwrite(ds.id(), type.id(), H5S_ALL, H5S_ALL, H5P_DEFAULT, text.data()) < 0)
+    ThrowIo("'{}': cannot write '{}'", path_, name);
+}
+
+std::string File::ReadString(const std::string& name) const {
+  Handle ds = OpenDataset(name);
+  Handle type(H5Dget_type(ds.id()));
+  Handle space(H5Dget_space(ds.id()));
+  return ReadStringValue(
+      type.id(), space.id(),
+      [&](hid_t mem, void* buf) { return H5Dread(ds.id(), mem, H5S_ALL, H5S_ALL, H5P_DEFAULT, buf); },
+      fmt::format("'{}': dataset '{}'", path_, name));
+}
+
+namespace {
+void WriteWhole(const File& f, const std::string& name, const std::vector<hsize_t>& dims, hid_t file_type,
+                hid_t mem_type, const void* data, const std::vector<hsize_t>& chunk = {}) {
+  Handle space(H5Screate_simple(static_cast<int>(dims.size()), dims.data(), nullptr));
+  Handle dcpl(H5Pcreate(H5P_DATASET_CREATE));
+  if (!chunk.empty()) {
+    H5Pset_chunk(dcpl.id(), static_cast<int>(chunk.size()), chunk.data());
+    H5Pset_shuffle(dcpl.id());
+    H5Pset_deflate(dcpl.id(), 4);
+  }
+  Handle ds(H5Dcreate2(f.id(), name.c_str(), file_type, space.id(), H5P_DEFAULT, dcpl.id(), H5P_DEFAULT));
+  if (!ds.valid() || H5Dwrite(ds.id(), mem_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, data) < 0)
+    ThrowIo("'{}': cannot write dataset '{}' (disk full?)", f.path(), name);
+}
+}  // namespace
+
+void File::WriteDoubles(const std::string& name, const std::vector<hsize_t>& dims, const double* data) const {
+  WriteWhole(*this, name, dims, H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, data);
+}
+void File::WriteFloats(const std::string& name, const std::vector<hsize_t>& dims, const float* data, Storage storage,
+                       const std::vector<hsize_t>& chunk) const {
+  WriteWhole(*this, name, dims, storage == Storage::kFloat16 ? HalfType() : H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, data,
+             chunk);
+}
+void File::WriteInts(const std::string& name, const std::vector<hsize_t>& dims, const std::int32_t* data) const {
+  WriteWhole(*this, name, dims, H5T_STD_I32LE, H5T_NATIVE_INT32, data);
+}
+
+Handle File::OpenDataset(const std::string& name) const {
+  if (!Exists(name)) ThrowBadInput("'{}': required dataset '{}' is missing", path_, name);
+  Handle ds(H5Dopen2(id(), name.c_str(), H5P_DEFAULT));
+  if (!ds.valid()) ThrowBadInput("'{}': '{}' is not a dataset (corrupt file?)", path_, name);
+  return ds;
+}
+
+std::vector<hsize_t> File::Dims(const std::string& name) const {
+  Handle ds = OpenDataset(name);
+  Handle space(H5Dget_space(ds.id()));
+  const int rank = H5Sget_simple_extent_ndims(space.id());
+  if (rank < 0 || rank > 8) ThrowBadInput("'{}': dataset '{}' has an invalid shape", path_, name);
+  std::vector<hsize_t> dims(static_cast<std::size_t>(rank));
+  H5Sget_simple_extent_dims(space.id(), dims.data(), nullptr);
+  return dims;
+}
+
+namespace {
+template <typename T>
+std::vector<T> ReadWhole(const File& f, const std::string& name, hid_t mem_type, H5T_class_t want_class) {
+  const auto dims = f.Dims(name);
+  std::uint64_t n = 1;
+  for (auto d : dims) n *= d;
+  CheckAllocation(n * sizeof(T), fmt::format("'{}': dataset '{}'", f.path(), name));
+  Handle ds(H5Dopen2(f.id(), name.c_str(), H5P_DEFAULT));
+  Handle type(H5Dget_type(ds.id()));
+  const H5T_class_t cls = H5Tget_class(type.id());
+  if (cls != want_class && !(want_class == H5T_FLOAT && cls == H5T_INTEGER))
+    ThrowBadInput("'{}': dataset '{}' has the wrong element type", f.path(), name);
+  std::vector<T> out(n);
+  if (n > 0 && H5Dread(ds.id(), mem_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, out.data()) < 0)
+    ThrowBadInput("'{}': cannot read dataset '{}': the file is truncated or corrupt", f.path(), name);
+  return out;
+}
+}  // namespace
+
+std::vector<double> File::ReadDoubles(const std::string& name) const {
+  return ReadWhole<double>(*this, name, H5T_NATIVE_DOUBLE, H5T_FLOAT);
+}
+std::vector<float> File::ReadFloats(const std::string& name) const {
+  return ReadWhole<float>(*this, name, H5T_NATIVE_FLOAT, H5T_FLOAT);
+}
+std::vector<std::int32_t> File::ReadInts(const std::string& name) const {
+  return ReadWhole<std::int32_t>(*this, name, H5T_NATIVE_INT32, H5T_INTEGER);
+}
+
+void File::CreateFloatArray(const std::string& name, const std::vector<hsize_t>& dims,
+                            const std::vector<hsize_t>& chunk, Storage storage, int deflate_level) const {
+  Handle space(H5Screate_simple(static_cast<int>(dims.size()), dims.data(), nullptr));
+  Handle dcpl(H5Pcreate(H5P_DATASET_CREATE));
+  H5Pset_chunk(dcpl.id(), static_cast<int>(chunk.size()), chunk.data());
+  if (deflate_level > 0) {
+    H5Pset_shuffle(dcpl.id());
+    H5Pset_deflate(dcpl.id(), static_cast<unsigned>(deflate_level));
+  }
+  const hid_t type = storage == Storage::kFloat16 ? HalfType() : H5T_IEEE_F32LE;
+  Handle ds(H5Dcreate2(id(), name.c_str(), type, space.id(), H5P_DEFAULT, dcpl.id(), H5P_DEFAULT));
+  if (!ds.valid()) ThrowIo("'{}': cannot create dataset '{}'", path_, name);
+}
+
+namespace {
+Handle SelectSlab(const File& f, hid_t ds, const std::string& name, const std::vector<hsize_t>& offset,
+                  const std::vector<hsize_t>& count) {
+  Handle space(H5Dget_space(ds));
+  const int rank = H5Sget_simple_extent_ndims(space.id());
+  std::vector<hsize_t> dims(static_cast<std::size_t>(std::max(rank, 0)));
+  H5Sget_simple_extent_dims(space.id(), dims.data(), nullptr);
+  if (dims.size() != offset.size() || dims.size() != count.size())
+    ThrowBadInput("'{}': dataset '{}' has rank {}, expected {}", f.path(), name, dims.size(), offset.size());
+  for (std::size_t i = 0; i < dims.size(); ++i)
+    if (offset[i] + count[i] > dims[i])
+      ThrowBadInput("'{}': slab of '{}' out of range in dimension {} ({} + {} > {})", f.path(), name, i, offset[i],
+                    count[i], dims[i]);
+  H5Sselect_hyperslab(space.id(), H5S_SELECT_SET, offset.data(), nullptr, count.data(), nullptr);
+  return space;
+}
+}  // namespace
+
+void File::WriteSlab(const std::string& name, const std::vector<hsize_t>& offset, const std::vector<hsize_t>& count,
+                     const float* data) const {
+  Handle ds = OpenDataset(name);
+  Handle fspace = SelectSlab(*this, ds.id(), name, offset, count);
+  Handle mspace(H5Screate_simple(static_cast<int>(count.size()), count.data(), nullptr));
+  if (H5Dwrite(ds.id(), H5T_NATIVE_FLOAT, mspace.id(), fspace.id(), H5P_DEFAULT, data) < 0)
+    ThrowIo("'{}': cannot write to '{}' (disk full?)", path_, name);
+}
+
+void File::ReadSlab(const std::string& name, const std::vector<hsize_t>& offset, const std::vector<hsize_t>& count,
+                    float* data) const {
+  Handle ds = OpenDataset(name);
+  Handle fspace = SelectSlab(*this, ds.id(), name, offset, count);
+  Handle mspace(H5Screate_simple(static_cast<int>(count.size()), count.data(), nullptr));
+  if (H5Dread(ds.id(), H5T_NATIVE_FLOAT, mspace.id(), fspace.id(), H5P_DEFAULT, data) < 0)
+    ThrowBadInput("'{}': cannot read from '{}': the file is truncated or corrupt", path_, name);
+}
+
+std::string File::StorageOf(const std::string& name) const {
+  Handle ds = OpenDataset(name);
+  Handle type(H5Dget_type(ds.id()));
+  if (H5Tget_class(type.id()) != H5T_FLOAT) ThrowBadInput("'{}': '{}' must hold floating-point values", path_, name);
+  const std::size_t size = H5Tget_size(type.id());
+  if (size == 2) return "float16";
+  if (size == 4) return "float32";
+  if (size == 8) return "float64";
+  ThrowBadInput("'{}': '{}' has an unsupported {}-byte float type", path_, name, size);
+}
+
+void File::WriteFormatHeader(const std::string& format, const std::string& version, const std::string& creator) const {
+  SetAttr("/", "format", format);
+  SetAttr("/", "format_version", version);
+  SetAttr("/", "creator", creator);
+  const std::time_t now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
+  std::tm tm{};
+  gmtime_r(&now, &tm);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
+  SetAttr("/", "creation_time", std::string(buf));
+}
+
+std::string File::CheckFormatHeader(const std::string& format, int supported_major) const {
+  if (!HasAttr("/", "format"))
+    ThrowBadInput("'{}' is not a libbtf file: the root attribute 'format' is missing", path_);
+  const std::string got = GetString("/", "format");
+  if (got != format) ThrowBadInput("'{}' holds a '{}', expected a '{}'", path_, got, format);
+  const std::string version = GetString("/", "format_version");
+  const int major = MajorVersion(version);
+  if (major < 0) ThrowBadInput("'{}': format_version '{}' is not MAJOR.MINOR.PATCH", path_, version);
+  if (major > supported_major)
+    ThrowBadInput("'{}' is {} version {}, newer than this libbtf reads (major {}); upgrade libbtf", path_, format,
+                  version, supported_major);
+  return version;
+}
+
+void File::Flush() const { H5Fflush(id(), H5F_SCOPE_GLOBAL); }
+
+}  // namespace btf::h5

@@ -1,0 +1,108 @@
+#pragma once
+// Thin RAII layer over the HDF5 C API (HDF5 1.10, thread-safe build: call from one thread).
+// Every failure becomes a btf::Error that names the file and the item.
+#include <hdf5.h>
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace btf::h5 {
+
+// Owns one hid_t and closes it with the matching H5xclose.
+class Handle {
+ public:
+  Handle() = default;
+  explicit Handle(hid_t id) : id_(id) {}
+  ~Handle() { reset(); }
+  Handle(Handle&& o) noexcept : id_(o.id_) { o.id_ = H5I_INVALID_HID; }
+  Handle& operator=(Handle&& o) noexcept {
+    if (this != &o) {
+      reset();
+      id_ = o.id_;
+      o.id_ = H5I_INVALID_HID;
+    }
+    return *this;
+  }
+  Handle(const Handle&) = delete;
+  Handle& operator=(const Handle&) = delete;
+  hid_t id() const { return id_; }
+  bool valid() const { return id_ >= 0; }
+  void reset();
+
+ private:
+  hid_t id_ = H5I_INVALID_HID;
+};
+
+enum class Storage { kFloat32, kFloat16 };
+
+// An open file with its path kept for messages.
+class File {
+ public:
+  // Creates (truncating) a file for writing.
+  static File Create(const std::filesystem::path& path);
+  // Opens read-only; a missing, truncated or non-HDF5 file gives a bad-input/I/O error.
+  static File Open(const std::filesystem::path& path);
+
+  hid_t id() const { return file_.id(); }
+  const std::string& path() const { return path_; }
+
+  bool Exists(const std::string& object) const;
+  void CreateGroup(const std::string& group) const;
+
+  // Attributes on an object ("/" = root). Missing/ill-typed attributes throw bad-input errors.
+  void SetAttr(const std::string& object, const std::string& name, const std::string& value) const;
+  void SetAttr(const std::string& object, const std::string& name, std::int64_t value) const;
+  void SetAttr(const std::string& object, const std::string& name, double value) const;
+  bool HasAttr(const std::string& object, const std::string& name) const;
+  std::string GetString(const std::string& object, const std::string& name) const;
+  std::int64_t GetInt(const std::string& object, const std::string& name) const;
+  double GetDouble(const std::string& object, const std::string& name) const;
+
+  // Whole small datasets.
+  void WriteString(const std::string& name, const std::string& text) const;
+  std::string ReadString(const std::string& name) const;
+  void WriteDoubles(const std::string& name, const std::vector<hsize_t>& dims, const double* data) const;
+  void WriteFloats(const std::string& name, const std::vector<hsize_t>& dims, const float* data,
+                   Storage storage = Storage::kFloat32, const std::vector<hsize_t>& chunk = {}) const;
+  void WriteInts(const std::string& name, const std::vector<hsize_t>& dims, const std::int32_t* data) const;
+  std::vector<hsize_t> Dims(const std::string& name) const;
+  // Reads a whole dataset converted to the requested type (checks the element count).
+  std::vector<double> ReadDoubles(const std::string& name) const;
+  std::vector<float> ReadFloats(const std::string& name) const;
+  std::vector<std::int32_t> ReadInts(const std::string& name) const;
+
+  // Chunked float dataset for large arrays (shuffle + deflate).
+  void CreateFloatArray(const std::string& name, const std::vector<hsize_t>& dims, const std::vector<hsize_t>& chunk,
+                        Storage storage, int deflate_level) const;
+  // Reads or writes the hyperslab [offset, offset+count) of a float dataset.
+  void WriteSlab(const std::string& name, const std::vector<hsize_t>& offset, const std::vector<hsize_t>& count,
+                 const float* data) const;
+  void ReadSlab(const std::string& name, const std::vector<hsize_t>& offset, const std::vector<hsize_t>& count,
+                float* data) const;
+  // "float32" or "float16".
+  std::string StorageOf(const std::string& name) const;
+
+  // Writes the root attributes format, format_version, creator, creation_time.
+  void WriteFormatHeader(const std::string& format, const std::string& version, const std::string& creator) const;
+  // Checks the root `format` equals `format` and the major version is <= supported_major.
+  // Returns the version string.
+  std::string CheckFormatHeader(const std::string& format, int supported_major) const;
+
+  void Flush() const;
+
+ private:
+  Handle OpenDataset(const std::string& name) const;
+  Handle file_;
+  std::string path_;
+};
+
+// Semantic version "MAJOR.MINOR.PATCH" -> MAJOR; -1 if malformed.
+int MajorVersion(const std::string& semver);
+// The HDF5 type used for Storage::kFloat16 (IEEE binary16, little-endian).
+hid_t HalfType();
+// Turns off HDF5's automatic error printing (we report errors ourselves).
+void SilenceErrors();
+
+}  // namespace btf::h5

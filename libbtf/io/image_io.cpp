@@ -1,0 +1,81 @@
+#include "libbtf/io/image_io.h"
+
+#include <OpenImageIO/imageio.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "libbtf/core/atomic_file.h"
+#include "libbtf/core/dataset.h"
+#include "libbtf/core/error.h"
+
+namespace btf {
+
+float SrgbToLinear(float v) {
+  return v <= 0.04045f ? v / 12.92f : std::pow((v + 0.055f) / 1.055f, 2.4f);
+}
+float LinearToSrgb(float v) {
+  v = std::clamp(v, 0.0f, 1.0f);
+  return v <= 0.0031308f ? 12.92f * v : 1.055f * std::pow(v, 1.0f / 2.4f) - 0.055f;
+}
+
+namespace {
+std::string Lower(std::string s) {
+  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
+  return s;
+}
+}  // namespace
+
+Image ReadImage(const std::filesystem::path& path) {
+  const std::string name = path.string();
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) ThrowIo("cannot read image '{}': no such file", name);
+  auto in = OIIO::ImageInput::open(name);
+  if (!in) ThrowBadInput("cannot read image '{}': {}", name, OIIO::geterror());
+  const OIIO::ImageSpec& spec = in->spec();
+  if (spec.width < 1 || spec.height < 1 || spec.nchannels < 1)
+    ThrowBadInput("image '{}' has an invalid size {}x{}x{}", name, spec.width, spec.height, spec.nchannels);
+  CheckAllocation(std::uint64_t(spec.width) * spec.height * spec.nchannels * 4, "image '" + name + "'");
+  Image img(spec.width, spec.height, spec.nchannels);
+  if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, img.pixels.data()))
+    ThrowBadInput("cannot decode image '{}' (truncated or corrupt?): {}", name, in->geterror());
+  const bool integer = spec.format.basetype != OIIO::TypeDesc::FLOAT && spec.format.basetype != OIIO::TypeDesc::HALF &&
+                       spec.format.basetype != OIIO::TypeDesc::DOUBLE;
+  const std::string cs = Lower(spec.get_string_attribute("oiio:ColorSpace"));
+  const std::string ext = Lower(path.extension().string());
+  const bool srgb = integer && (cs == "srgb" || (cs.empty() && (ext == ".png" || ext == ".jpg" || ext == ".jpeg")));
+  if (srgb) {
+    const int alpha = spec.alpha_channel;
+    for (std::size_t i = 0; i < img.pixels.size(); ++i)
+      if (static_cast<int>(i % std::size_t(spec.nchannels)) != alpha) img.pixels[i] = SrgbToLinear(img.pixels[i]);
+  }
+  return img;
+}
+
+void WriteImage(const std::filesystem::path& path, const Image& image, const ImageWriteOptions& options) {
+  const std::string ext = Lower(path.extension().string());
+  PixelFormat fmt = options.format;
+  if (!options.has_format) fmt = ext == ".exr" ? PixelFormat::kFloat : (ext == ".jpg" ? PixelFormat::kUint8 : PixelFormat::kUint16);
+  OIIO::TypeDesc type = fmt == PixelFormat::kUint8    ? OIIO::TypeDesc::UINT8
+                        : fmt == PixelFormat::kUint16 ? OIIO::TypeDesc::UINT16
+                        : fmt == PixelFormat::kHalf   ? OIIO::TypeDesc::HALF
+                                                      : OIIO::TypeDesc::FLOAT;
+  std::vector<float> buf = image.pixels;
+  const bool integer = fmt == PixelFormat::kUint8 || fmt == PixelFormat::kUint16;
+  for (auto& v : buf) {
+    if (!std::isfinite(v)) v = 0;
+    if (integer) v = options.srgb ? LinearToSrgb(v) : std::clamp(v, 0.0f, 1.0f);
+  }
+  OIIO::ImageSpec spec(image.width, image.height, image.channels, type);
+  spec.attribute("oiio:ColorSpace", integer && options.srgb ? "sRGB" : "linear");
+  if (ext == ".exr") spec.attribute("compression", "zip");
+  AtomicOutput out(path);
+  auto writer = OIIO::ImageOutput::create(ext);
+  if (!writer) ThrowUsage("cannot write image '{}': unsupported file type '{}'", path.string(), ext);
+  if (!writer->open(out.temp_path().string(), spec) || !writer->write_image(OIIO::TypeDesc::FLOAT, buf.data()) ||
+      !writer->close())
+    ThrowIo("cannot write image '{}': {}", path.string(), writer->geterror());
+  out.Commit();
+}
+
+}  // namespace btf

@@ -1,0 +1,39 @@
+#pragma once
+// Image files through OpenImageIO. Pixels in memory are always linear float32, row-major,
+// channel fastest, y down (row 0 = top of the picture).
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace btf {
+
+struct Image {
+  int width = 0, height = 0, channels = 0;
+  std::vector<float> pixels;
+  Image() = default;
+  Image(int w, int h, int c) : width(w), height(h), channels(c), pixels(std::size_t(w) * h * c, 0.0f) {}
+  float& at(int x, int y, int c) { return pixels[(std::size_t(y) * width + x) * channels + c]; }
+  float at(int x, int y, int c) const { return pixels[(std::size_t(y) * width + x) * channels + c]; }
+};
+
+enum class PixelFormat { kUint8, kUint16, kHalf, kFloat };
+
+struct ImageWriteOptions {
+  // Default: float for .exr, uint16 for .png/.tif, uint8 for .jpg.
+  bool has_format = false;
+  PixelFormat format = PixelFormat::kFloat;
+  // Integer formats: encode with the sRGB transfer curve (true) or store linear values (false).
+  bool srgb = false;
+};
+
+// Reads any format OpenImageIO reads. Integer files tagged sRGB (PNG and JPEG by default, or an
+// "oiio:ColorSpace" of sRGB) are decoded to linear; everything else is read as stored and
+// normalised to [0, 1] for integer types. Throws btf::Error naming the file.
+Image ReadImage(const std::filesystem::path& path);
+// Writes atomically. Values are clamped to the integer range for integer formats.
+void WriteImage(const std::filesystem::path& path, const Image& image, const ImageWriteOptions& options = {});
+
+float SrgbToLinear(float v);
+float LinearToSrgb(float v);
+
+}  // namespace btf

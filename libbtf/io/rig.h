@@ -1,0 +1,79 @@
+#pragma once
+// The measurement rig as files: board (marker layout), photo manifest, and ground truth
+// (written by btf-synth photos, read by btf-register). Normative: docs/format.md.
+//
+// Plate frame: millimetres, origin at the centre of the sample region, x right (= weft, texture
+// u), y up (= warp, texture v), z towards the camera side; the material surface is z = 0 and a
+// marker at height h lies in the plane z = h.
+// Pixel convention: OpenCV's, pixel centres at integer coordinates, (0,0) = centre of the
+// top-left pixel, y down.
+#include <array>
+#include <filesystem>
+#include <map>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+
+#include "libbtf/core/directions.h"
+
+namespace btf {
+
+struct Marker {
+  int id = 0;
+  // Corners in plate mm, in AprilTag's order for the upright tag: left-bottom, right-bottom,
+  // right-top, left-top of the tag's detection square (the black border's outer edge).
+  std::array<Vec2, 4> corners_mm;
+  double height_mm = 0;  // height of the marker plane above the material surface
+};
+
+struct Board {
+  std::string family = "tag36h11";
+  double sample_size_mm = 40;  // side of the square sample region centred at the origin
+  std::vector<Marker> markers;
+  void Check(const std::string& source) const;  // ids unique, corners finite, non-degenerate
+};
+
+struct CameraModel {
+  int width = 0, height = 0;
+  double fx = 0, fy = 0, cx = 0, cy = 0;  // OpenCV convention
+  double k1 = 0, k2 = 0;                  // radial distortion (OpenCV model, no tangential)
+};
+
+struct PhotoEntry {
+  std::string file;  // relative to the manifest's folder
+  int view_index = -1, light_index = -1;
+  Vec3 view_dir = Vec3::UnitZ(), light_dir = Vec3::UnitZ();  // unit vectors, plate frame
+  double exposure = 1;         // pixel value = exposure * radiance
+  double light_intensity = 1;  // directional: irradiance at normal incidence; point: intensity (x 1/r^2 in mm^2)
+  double light_distance_mm = 0;  // 0 = directional light, else point light at this distance from the origin
+  double camera_distance_mm = 0;
+  CameraModel camera;
+};
+
+struct Manifest {
+  std::string board_file;  // relative to the manifest's folder
+  Sampling views, lights;  // the full samplings the indices refer to
+  int bit_depth = 0;       // 0 = float EXR, 8 or 16 = integer PNG (linear, not sRGB)
+  std::vector<PhotoEntry> photos;
+  nlohmann::json extra = nlohmann::json::object();  // model, preset, resolution hints
+};
+
+struct PhotoTruth {
+  std::string file;
+  Eigen::Matrix3d plate_to_image = Eigen::Matrix3d::Identity();  // homography, material surface z = 0 -> pixels
+  Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();        // camera_from_plate
+  Vec3 translation = Vec3::Zero();                               // camera_from_plate, mm
+  std::map<int, std::array<Vec2, 4>> marker_corners_px;          // visible markers only
+};
+
+// Readers validate every field and throw btf::Error (bad input) naming file, entry and field.
+Board ReadBoard(const std::filesystem::path& path);
+void WriteBoard(const std::filesystem::path& path, const Board& board);
+Manifest ReadManifest(const std::filesystem::path& path);
+void WriteManifest(const std::filesystem::path& path, const Manifest& manifest);
+std::vector<PhotoTruth> ReadTruth(const std::filesystem::path& path);
+void WriteTruth(const std::filesystem::path& path, const std::vector<PhotoTruth>& truth);
+
+}  // namespace btf

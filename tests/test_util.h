@@ -1,0 +1,22 @@
+#pragma once
+// Helpers shared by the test suites.
+#include <filesystem>
+#include <string>
+
+#include "libbtf/core/dataset.h"
+
+namespace btf::test {
+
+// A fresh empty directory for the current test (removed at process exit is not needed: under /tmp).
+std::filesystem::path TempDir();
+
+// Runs a command line through the shell; returns the exit code, stdout in *out (if non-null).
+int RunCommand(const std::string& command, std::string* out = nullptr);
+
+// Path of a built tool, e.g. Tool("btf-info").
+std::string Tool(const std::string& name);
+
+// A small deterministic dataset with distinct values per (v, l, y, x, c).
+Dataset MakeTestDataset(int views, int lights, int height, int width, int channels = 3);
+
+}  // namespace btf::test

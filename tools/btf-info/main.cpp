@@ -1,0 +1,48 @@
+// btf-info FILE: summary of a libbtf dataset or codec file (docs/btf-info.md).
+#include <fmt/format.h>
+
+#include "libbtf/io/dataset_stats.h"
+#include "libbtf/io/file_kind.h"
+#include "tools/common/cli.h"
+
+namespace {
+
+void PrintHuman(const nlohmann::json& j) {
+  fmt::print("{}\n", j["path"].get<std::string>());
+  for (const auto& [key, value] : j.items()) {
+    if (key == "path" || key == "provenance") continue;
+    if (key.ends_with("_sampling"))
+      fmt::print("  {:<22} {} ({} directions)\n", key, value["name"].get<std::string>(), value["count"].get<int>());
+    else
+      fmt::print("  {:<22} {}\n", key, value.dump());
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"Print the summary of a libbtf dataset or codec file: shape, samplings, conventions, size on disk, "
+               "value range and NaN count.",
+               "btf-info"};
+  btf::cli::CommonFlags common;
+  std::string path;
+  bool no_stats = false;
+  app.add_option("FILE", path, "Dataset (.h5) or codec file")->required();
+  app.add_flag("--no-stats", no_stats, "Skip the value scan (min/max/NaN count), which reads every value");
+  btf::cli::AddCommonFlags(app, common);
+  return btf::cli::Main(argc, argv, app, [&] {
+    const btf::Reporter reporter = btf::cli::MakeReporter(common);
+    const std::string format = btf::FileFormatOf(path);
+    nlohmann::json j;
+    if (format == btf::kDatasetFormat)
+      j = btf::DescribeDatasetFile(path, !no_stats, reporter);
+    else
+      throw btf::Error(btf::ExitCode::kBadInput,
+                       fmt::format("'{}' holds format '{}', which this build of libbtf does not know", path, format));
+    if (common.json)
+      btf::cli::PrintJson(j);
+    else
+      PrintHuman(j);
+    return 0;
+  });
+}
