@@ -150,6 +150,7 @@ std::string ReadStringValue(hid_t stored_type, hid_t space, ReadFn read, const s
   if (H5Tis_variable_str(stored_type) > 0) {
     Handle mem(H5Tcopy(H5T_C_S1));
     H5Tset_size(mem.id(), H5T_VARIABLE);
+    H5Tset_cset(mem.id(), H5Tget_cset(stored_type));  // HDF5 does not convert ASCII <-> UTF-8
     char* p = nullptr;
     if (read(mem.id(), &p) < 0) ThrowBadInput("cannot read {}", what);
     std::string s = p ? p : "";
@@ -160,6 +161,7 @@ std::string ReadStringValue(hid_t stored_type, hid_t space, ReadFn read, const s
   if (n > (std::size_t(1) << 30)) ThrowBadInput("{} claims an absurd size ({} bytes)", what, n);
   std::string s(n, '\0');
   Handle mem = StringType(n);
+  H5Tset_cset(mem.id(), H5Tget_cset(stored_type));
   if (read(mem.id(), s.data()) < 0) ThrowBadInput("cannot read {}", what);
   s.resize(std::strlen(s.c_str()));
   return s;

@@ -30,7 +30,10 @@ Image ReadImage(const std::filesystem::path& path) {
   const std::string name = path.string();
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) ThrowIo("cannot read image '{}': no such file", name);
-  auto in = OIIO::ImageInput::open(name);
+  // Measurement data: a 4th channel is data, never premultiplied alpha to be (un)associated.
+  OIIO::ImageSpec config;
+  config.attribute("oiio:UnassociatedAlpha", 1);
+  auto in = OIIO::ImageInput::open(name, &config);
   if (!in) ThrowBadInput("cannot read image '{}': {}", name, OIIO::geterror());
   const OIIO::ImageSpec& spec = in->spec();
   if (spec.width < 1 || spec.height < 1 || spec.nchannels < 1)
@@ -68,9 +71,11 @@ void WriteImage(const std::filesystem::path& path, const Image& image, const Ima
   }
   OIIO::ImageSpec spec(image.width, image.height, image.channels, type);
   spec.attribute("oiio:ColorSpace", integer && options.srgb ? "sRGB" : "linear");
+  spec.alpha_channel = -1;
+  spec.attribute("oiio:UnassociatedAlpha", 1);
   if (ext == ".exr") spec.attribute("compression", "zip");
   AtomicOutput out(path);
-  auto writer = OIIO::ImageOutput::create(ext);
+  auto writer = OIIO::ImageOutput::create(out.temp_path().string());
   if (!writer) ThrowUsage("cannot write image '{}': unsupported file type '{}'", path.string(), ext);
   if (!writer->open(out.temp_path().string(), spec) || !writer->write_image(OIIO::TypeDesc::FLOAT, buf.data()) ||
       !writer->close())

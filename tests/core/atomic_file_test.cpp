@@ -1,0 +1,45 @@
+#include "libbtf/core/atomic_file.h"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include "libbtf/core/error.h"
+#include "tests/test_util.h"
+
+namespace btf {
+namespace {
+
+std::string Slurp(const std::filesystem::path& p) {
+  std::ifstream f(p);
+  return std::string(std::istreambuf_iterator<char>(f), {});
+}
+
+TEST(AtomicOutput, CommitReplacesAndAbandonKeepsTheOldFile) {
+  const auto dir = test::TempDir();
+  const auto path = dir / "out.json";
+  WriteTextFileAtomic(path, "first");
+  EXPECT_EQ(Slurp(path), "first");
+  {
+    AtomicOutput out(path);
+    std::ofstream(out.temp_path()) << "half-writ";
+    EXPECT_TRUE(std::filesystem::exists(out.temp_path()));
+    EXPECT_EQ(out.temp_path().extension(), ".json");  // writers that pick a type by extension work
+  }  // abandoned
+  EXPECT_EQ(Slurp(path), "first");
+  EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir), {}), 1);
+  WriteTextFileAtomic(path, "second");
+  EXPECT_EQ(Slurp(path), "second");
+}
+
+TEST(AtomicOutput, MissingFolderIsAnIoError) {
+  try {
+    AtomicOutput out(test::TempDir() / "no" / "such" / "f.h5");
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ExitCode::kIo);
+  }
+}
+
+}  // namespace
+}  // namespace btf
