@@ -1,0 +1,360 @@
+#include "libbtf/io/rig.h"
+
+#include <cmath>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+#include "libbtf/core/atomic_file.h"
+#include "libbtf/core/error.h"
+
+namespace btf {
+namespace {
+
+using json = nlohmann::json;
+
+constexpr const char* kBoardFormat = "libbtf-board";
+constexpr const char* kManifestFormat = "libbtf-manifest";
+constexpr const char* kTruthFormat = "libbtf-truth";
+constexpr const char* kRigVersion = "1.0.0";
+constexpr int kRigMajor = 1;
+
+json LoadJson(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  if (!in) ThrowIo("cannot open '{}': check that the file exists and is readable", path.string());
+  try {
+    return json::parse(in);
+  } catch (const json::exception& e) {
+    ThrowBadInput("'{}': not valid JSON ({})", path.string(), e.what());
+  }
+}
+
+// Accessor that names the file and the JSON path in every error.
+class Node {
+ public:
+  Node(const std::filesystem::path* file, const json* j, std::string where)
+      : file_(file), j_(j), where_(std::move(where)) {}
+
+  [[noreturn]] void Fail(const std::string& what) const {
+    ThrowBadInput("'{}': {}: {}", file_->string(), where_.empty() ? std::string("top level") : where_, what);
+  }
+  bool Has(const std::string& key) const { return j_->is_object() && j_->contains(key); }
+  Node operator[](const std::string& key) const {
+    if (!j_->is_object()) Fail("must be a JSON object");
+    if (!j_->contains(key)) Fail(fmt::format("missing required field '{}'", key));
+    return Node(file_, &(*j_)[key], where_.empty() ? key : where_ + "." + key);
+  }
+  Node At(std::size_t i) const {
+    return Node(file_, &(*j_)[i], fmt::format("{}[{}]", where_, i));
+  }
+  std::size_t ArraySize(std::size_t expected = 0) const {
+    if (!j_->is_array()) Fail("must be a JSON array");
+    if (expected && j_->size() != expected) Fail(fmt::format("must have {} entries, found {}", expected, j_->size()));
+    return j_->size();
+  }
+  double Double() const {
+    if (!j_->is_number()) Fail("must be a number");
+    const double v = j_->get<double>();
+    if (!std::isfinite(v)) Fail("must be finite");
+    return v;
+  }
+  int Int() const {
+    if (!j_->is_number_integer()) Fail("must be an integer");
+    return j_->get<int>();
+  }
+  std::string String() const {
+    if (!j_->is_string()) Fail("must be a string");
+    return j_->get<std::string>();
+  }
+  Vec2 Vector2() const {
+    ArraySize(2);
+    return Vec2(At(0).Double(), At(1).Double());
+  }
+  Vec3 Vector3() const {
+    ArraySize(3);
+    return Vec3(At(0).Double(), At(1).Double(), At(2).Double());
+  }
+  Vec3 UnitVector() const {
+    const Vec3 v = Vector3();
+    if (std::abs(v.norm() - 1) > 1e-3) Fail("must be a unit vector (length within 1e-3 of 1)");
+    return v.normalized();
+  }
+  Eigen::Matrix3d Matrix3() const {
+    ArraySize(3);
+    Eigen::Matrix3d m;
+    for (int r = 0; r < 3; ++r) m.row(r) = At(static_cast<std::size_t>(r)).Vector3().transpose();
+    return m;
+  }
+  const json& raw() const { return *j_; }
+  const std::string& where() const { return where_; }
+
+ private:
+  const std::filesystem::path* file_;
+  const json* j_;
+  std::string where_;
+};
+
+void CheckHeader(const Node& root, const char* format) {
+  const std::string f = root["format"].String();
+  if (f != format) root.Fail(fmt::format("'format' is '{}', expected '{}'", f, format));
+  const std::string v = root["format_version"].String();
+  int major = -1;
+  try {
+    major = std::stoi(v.substr(0, v.find('.')));
+  } catch (...) {
+    root.Fail(fmt::format("'format_version' '{}' is not MAJOR.MINOR.PATCH", v));
+  }
+  if (major < 0 || major > kRigMajor)
+    root.Fail(fmt::format("'format_version' {} is newer than this reader ({}.x): update libbtf", v, kRigMajor));
+}
+
+json Header(const char* format) {
+  json j;
+  j["format"] = format;
+  j["format_version"] = kRigVersion;
+  return j;
+}
+
+json ToJson(const Vec2& v) { return json::array({v.x(), v.y()}); }
+json ToJson(const Vec3& v) { return json::array({v.x(), v.y(), v.z()}); }
+json ToJson(const Eigen::Matrix3d& m) {
+  json j = json::array();
+  for (int r = 0; r < 3; ++r) j.push_back(json::array({m(r, 0), m(r, 1), m(r, 2)}));
+  return j;
+}
+
+json SamplingToJson(const Sampling& s) {
+  json j;
+  j["name"] = s.name();
+  json dirs = json::array();
+  for (const auto& d : s.directions()) dirs.push_back(ToJson(d));
+  j["directions"] = dirs;
+  return j;
+}
+
+Sampling SamplingFromJson(const Node& n) {
+  const std::string name = n["name"].String();
+  const Node dirs = n["directions"];
+  const std::size_t count = dirs.ArraySize();
+  if (count == 0) dirs.Fail("must not be empty");
+  std::vector<Vec3> v;
+  for (std::size_t i = 0; i < count; ++i) {
+    v.push_back(dirs.At(i).UnitVector());
+    if (v.back().z() <= 0) dirs.At(i).Fail("direction must lie in the upper hemisphere (z > 0)");
+  }
+  return Sampling(name, std::move(v));
+}
+
+void WriteJsonAtomic(const std::filesystem::path& path, const json& j) { WriteTextFileAtomic(path, j.dump(2) + "\n"); }
+
+}  // namespace
+
+void Board::Check(const std::string& source) const {
+  if (family.empty()) ThrowBadInput("'{}': board family is empty", source);
+  if (!(std::isfinite(sample_size_mm) && sample_size_mm > 0))
+    ThrowBadInput("'{}': sample_size_mm must be a positive number, found {}", source, sample_size_mm);
+  if (markers.empty()) ThrowBadInput("'{}': the board has no markers", source);
+  std::set<int> ids;
+  for (std::size_t i = 0; i < markers.size(); ++i) {
+    const Marker& m = markers[i];
+    if (m.id < 0) ThrowBadInput("'{}': markers[{}]: id {} is negative", source, i, m.id);
+    if (!ids.insert(m.id).second) ThrowBadInput("'{}': markers[{}]: duplicate marker id {}", source, i, m.id);
+    if (!std::isfinite(m.height_mm)) ThrowBadInput("'{}': markers[{}] (id {}): height_mm is not finite", source, i, m.id);
+    double area2 = 0;  // shoelace, twice the signed area
+    for (int k = 0; k < 4; ++k) {
+      if (!m.corners_mm[k].allFinite())
+        ThrowBadInput("'{}': markers[{}] (id {}): corner {} is not finite", source, i, m.id, k);
+      const Vec2& a = m.corners_mm[k];
+      const Vec2& b = m.corners_mm[(k + 1) % 4];
+      area2 += a.x() * b.y() - a.y() * b.x();
+    }
+    if (std::abs(area2) < 1e-6)
+      ThrowBadInput("'{}': markers[{}] (id {}): corners are degenerate (zero area)", source, i, m.id);
+  }
+}
+
+Board ReadBoard(const std::filesystem::path& path) {
+  const json j = LoadJson(path);
+  const Node root(&path, &j, "");
+  CheckHeader(root, kBoardFormat);
+  Board b;
+  b.family = root["family"].String();
+  b.sample_size_mm = root["sample_size_mm"].Double();
+  const Node ms = root["markers"];
+  const std::size_t n = ms.ArraySize();
+  for (std::size_t i = 0; i < n; ++i) {
+    const Node m = ms.At(i);
+    Marker mk;
+    mk.id = m["id"].Int();
+    const Node c = m["corners_mm"];
+    c.ArraySize(4);
+    for (int k = 0; k < 4; ++k) mk.corners_mm[k] = c.At(static_cast<std::size_t>(k)).Vector2();
+    mk.height_mm = m.Has("height_mm") ? m["height_mm"].Double() : 0.0;
+    b.markers.push_back(mk);
+  }
+  b.Check(path.string());
+  return b;
+}
+
+void WriteBoard(const std::filesystem::path& path, const Board& board) {
+  board.Check(path.string());
+  json j = Header(kBoardFormat);
+  j["family"] = board.family;
+  j["units"] = "mm";
+  j["corner_order"] = "left-bottom, right-bottom, right-top, left-top of the upright tag (AprilTag order)";
+  j["sample_size_mm"] = board.sample_size_mm;
+  json ms = json::array();
+  for (const auto& m : board.markers) {
+    json jm;
+    jm["id"] = m.id;
+    jm["corners_mm"] = json::array();
+    for (const auto& c : m.corners_mm) jm["corners_mm"].push_back(ToJson(c));
+    jm["height_mm"] = m.height_mm;
+    ms.push_back(jm);
+  }
+  j["markers"] = ms;
+  WriteJsonAtomic(path, j);
+}
+
+namespace {
+CameraModel CameraFromJson(const Node& n) {
+  CameraModel c;
+  c.width = n["width"].Int();
+  c.height = n["height"].Int();
+  if (c.width < 1 || c.height < 1) n.Fail("width and height must be >= 1");
+  c.fx = n["fx"].Double();
+  c.fy = n["fy"].Double();
+  if (!(c.fx > 0 && c.fy > 0)) n.Fail("fx and fy must be > 0");
+  c.cx = n["cx"].Double();
+  c.cy = n["cy"].Double();
+  c.k1 = n.Has("k1") ? n["k1"].Double() : 0.0;
+  c.k2 = n.Has("k2") ? n["k2"].Double() : 0.0;
+  return c;
+}
+json CameraToJson(const CameraModel& c) {
+  return json{{"width", c.width}, {"height", c.height}, {"fx", c.fx}, {"fy", c.fy},
+              {"cx", c.cx},       {"cy", c.cy},         {"k1", c.k1}, {"k2", c.k2}};
+}
+}  // namespace
+
+Manifest ReadManifest(const std::filesystem::path& path) {
+  const json j = LoadJson(path);
+  const Node root(&path, &j, "");
+  CheckHeader(root, kManifestFormat);
+  Manifest m;
+  m.board_file = root["board"].String();
+  if (m.board_file.empty()) root["board"].Fail("must name the board file");
+  m.views = SamplingFromJson(root["views"]);
+  m.lights = SamplingFromJson(root["lights"]);
+  m.bit_depth = root["bit_depth"].Int();
+  if (m.bit_depth != 0 && m.bit_depth != 8 && m.bit_depth != 16) root["bit_depth"].Fail("must be 0 (float), 8 or 16");
+  if (root.Has("extra")) m.extra = root["extra"].raw();
+  const Node ps = root["photos"];
+  const std::size_t n = ps.ArraySize();
+  for (std::size_t i = 0; i < n; ++i) {
+    const Node p = ps.At(i);
+    PhotoEntry e;
+    e.file = p["file"].String();
+    if (e.file.empty()) p["file"].Fail("must name the photo file");
+    e.view_index = p["view_index"].Int();
+    e.light_index = p["light_index"].Int();
+    if (e.view_index < 0 || e.view_index >= m.views.size())
+      p["view_index"].Fail(fmt::format("{} is outside the view sampling (0..{})", e.view_index, m.views.size() - 1));
+    if (e.light_index < 0 || e.light_index >= m.lights.size())
+      p["light_index"].Fail(fmt::format("{} is outside the light sampling (0..{})", e.light_index, m.lights.size() - 1));
+    e.view_dir = p["view_dir"].UnitVector();
+    e.light_dir = p["light_dir"].UnitVector();
+    e.exposure = p["exposure"].Double();
+    if (!(e.exposure > 0)) p["exposure"].Fail("must be > 0");
+    e.light_intensity = p["light_intensity"].Double();
+    if (!(e.light_intensity > 0)) p["light_intensity"].Fail("must be > 0");
+    e.light_distance_mm = p.Has("light_distance_mm") ? p["light_distance_mm"].Double() : 0.0;
+    if (e.light_distance_mm < 0) p["light_distance_mm"].Fail("must be >= 0 (0 = directional light)");
+    e.camera_distance_mm = p.Has("camera_distance_mm") ? p["camera_distance_mm"].Double() : 0.0;
+    if (e.camera_distance_mm < 0) p["camera_distance_mm"].Fail("must be >= 0");
+    e.camera = CameraFromJson(p["camera"]);
+    m.photos.push_back(std::move(e));
+  }
+  return m;
+}
+
+void WriteManifest(const std::filesystem::path& path, const Manifest& m) {
+  json j = Header(kManifestFormat);
+  j["board"] = m.board_file;
+  j["views"] = SamplingToJson(m.views);
+  j["lights"] = SamplingToJson(m.lights);
+  j["bit_depth"] = m.bit_depth;
+  j["pixel_value"] = "exposure * radiance; radiance = BTF(1/sr) * irradiance";
+  json ps = json::array();
+  for (const auto& e : m.photos) {
+    ps.push_back(json{{"file", e.file},
+                      {"view_index", e.view_index},
+                      {"light_index", e.light_index},
+                      {"view_dir", ToJson(e.view_dir)},
+                      {"light_dir", ToJson(e.light_dir)},
+                      {"exposure", e.exposure},
+                      {"light_intensity", e.light_intensity},
+                      {"light_distance_mm", e.light_distance_mm},
+                      {"camera_distance_mm", e.camera_distance_mm},
+                      {"camera", CameraToJson(e.camera)}});
+  }
+  j["photos"] = ps;
+  j["extra"] = m.extra;
+  WriteJsonAtomic(path, j);
+}
+
+std::vector<PhotoTruth> ReadTruth(const std::filesystem::path& path) {
+  const json j = LoadJson(path);
+  const Node root(&path, &j, "");
+  CheckHeader(root, kTruthFormat);
+  const Node ps = root["photos"];
+  const std::size_t n = ps.ArraySize();
+  std::vector<PhotoTruth> out;
+  for (std::size_t i = 0; i < n; ++i) {
+    const Node p = ps.At(i);
+    PhotoTruth t;
+    t.file = p["file"].String();
+    t.plate_to_image = p["plate_to_image"].Matrix3();
+    t.rotation = p["rotation"].Matrix3();
+    t.translation = p["translation"].Vector3();
+    const Node ms = p["markers"];
+    const std::size_t nm = ms.ArraySize();
+    for (std::size_t k = 0; k < nm; ++k) {
+      const Node mk = ms.At(k);
+      const int id = mk["id"].Int();
+      const Node c = mk["corners_px"];
+      c.ArraySize(4);
+      std::array<Vec2, 4> corners;
+      for (int q = 0; q < 4; ++q) corners[q] = c.At(static_cast<std::size_t>(q)).Vector2();
+      if (!t.marker_corners_px.emplace(id, corners).second) mk["id"].Fail(fmt::format("duplicate marker id {}", id));
+    }
+    out.push_back(std::move(t));
+  }
+  return out;
+}
+
+void WriteTruth(const std::filesystem::path& path, const std::vector<PhotoTruth>& truth) {
+  json j = Header(kTruthFormat);
+  j["conventions"] =
+      "plate_to_image maps plate mm (x, y, 1) on the material surface z = 0 to pixels (OpenCV: (0,0) = centre "
+      "of the top-left pixel); rotation/translation: camera_from_plate (OpenCV camera: x right, y down, z "
+      "forward); corners in the board's order";
+  json ps = json::array();
+  for (const auto& t : truth) {
+    json jm = json::array();
+    for (const auto& [id, corners] : t.marker_corners_px) {
+      json c = json::array();
+      for (const auto& p : corners) c.push_back(ToJson(p));
+      jm.push_back(json{{"id", id}, {"corners_px", c}});
+    }
+    ps.push_back(json{{"file", t.file},
+                      {"plate_to_image", ToJson(t.plate_to_image)},
+                      {"rotation", ToJson(t.rotation)},
+                      {"translation", ToJson(t.translation)},
+                      {"markers", jm}});
+  }
+  j["photos"] = ps;
+  WriteJsonAtomic(path, j);
+}
+
+}  // namespace btf
