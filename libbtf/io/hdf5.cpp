@@ -1,6 +1,9 @@
 #include "libbtf/io/hdf5.h"
 
+#include <cerrno>
 #include <chrono>
+#include <cstdio>
+#include <cstring>
 #include <ctime>
 #include <mutex>
 
@@ -53,13 +56,39 @@ int MajorVersion(const std::string& semver) {
   return major;
 }
 
+namespace {
+// Refuses files without checksummed metadata before HDF5 parses them: libbtf writes superblock
+// version >= 2 (metadata checksums); older layouts carry no checksums, and HDF5 1.10.8 can
+// crash on damaged unchecksummed metadata.
+void CheckSuperblock(const std::string& path) {
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f) ThrowIo("cannot open '{}': {}", path, std::strerror(errno));
+  static const unsigned char kSignature[8] = {0x89, 'H', 'D', 'F', '\r', '\n', 0x1a, '\n'};
+  int version = -1;
+  // The superblock sits at byte 0, 512, 1024, 2048, ... (user block).
+  for (long offset = 0; offset <= (1L << 20) && version < 0; offset = offset ? offset * 2 : 512) {
+    unsigned char buf[9];
+    if (std::fseek(f, offset, SEEK_SET) != 0 || std::fread(buf, 1, 9, f) != 9) break;
+    if (std::memcmp(buf, kSignature, 8) == 0) version = buf[8];
+  }
+  std::fclose(f);
+  if (version < 0) ThrowBadInput("'{}' is not an HDF5 file (wrong file, or its header is corrupt)", path);
+  if (version < 2)
+    ThrowBadInput("'{}' uses HDF5 superblock version {} without metadata checksums; libbtf writes and reads "
+                  "version >= 2 files only (re-create it with libbtf, or convert it with h5repack)",
+                  path, version);
+}
+}  // namespace
+
 File File::Create(const std::filesystem::path& path) {
   SilenceErrors();
   File f;
   f.path_ = path.string();
   Handle fapl(H5Pcreate(H5P_FILE_ACCESS));
-  // 1.8-compatible object headers: files stay readable by older HDF5 readers.
-  H5Pset_libver_bounds(fapl.id(), H5F_LIBVER_EARLIEST, H5F_LIBVER_V18);
+  // HDF5 1.10 file format: superblock v3 and object headers, chunk indexes and heaps with
+  // checksums, so corrupted metadata is refused by checksum before HDF5 parses it (HDF5 1.10.8's
+  // parser is not memory-safe on damaged metadata; see docs/format.md). Readable by HDF5 >= 1.10.
+  H5Pset_libver_bounds(fapl.id(), H5F_LIBVER_V110, H5F_LIBVER_V110);
   f.file_ = Handle(H5Fcreate(f.path_.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, fapl.id()));
   if (!f.file_.valid()) ThrowIo("cannot create HDF5 file '{}': check the folder exists and is writable", f.path_);
   return f;
@@ -71,8 +100,7 @@ File File::Open(const std::filesystem::path& path) {
   f.path_ = path.string();
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) ThrowIo("cannot open '{}': no such file", f.path_);
-  if (H5Fis_hdf5(f.path_.c_str()) <= 0)
-    ThrowBadInput("'{}' is not an HDF5 file (wrong file, or its header is corrupt)", f.path_);
+  CheckSuperblock(f.path_);
   f.file_ = Handle(H5Fopen(f.path_.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT));
   if (!f.file_.valid())
     ThrowBadInput("cannot open HDF5 file '{}': the file is truncated or corrupt; re-create or re-copy it", f.path_);

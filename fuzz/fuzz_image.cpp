@@ -1,0 +1,15 @@
+// Fuzzes image reading as we interpret it (headers, sRGB decision, size limits) for PNG and EXR.
+#include "fuzz/fuzz_util.h"
+#include "libbtf/core/error.h"
+#include "libbtf/io/image_io.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  if (size < 1) return 0;
+  // First byte picks the container so one corpus covers both.
+  btf::fuzz::TempInput in(data + 1, size - 1, data[0] & 1 ? ".exr" : ".png");
+  try {
+    btf::ReadImage(in.path());
+  } catch (const btf::Error&) {
+  }
+  return 0;
+}
