@@ -21,6 +21,9 @@ class SvbrdfModel {
   // Far-field BRDF (the tile average). Models with an analytic answer override this; the
   // default averages Eval over a stratified n x n grid of the tile.
   virtual void EvalBrdf(const Vec3& wi, const Vec3& wo, float* out) const;
+  // Eval at n tile positions for one direction pair (out: n x channels). Models override this to
+  // hoist per-pair work out of the loop; the default calls Eval n times.
+  virtual void EvalBatch(const Vec3& wi, const Vec3& wo, const Vec2* uv, int n, float* out) const;
   // All parameters, for provenance and docs.
   virtual nlohmann::json Describe() const = 0;
   // Physical size of one tile in mm (photo synthesis places tiles on the plate with this).
