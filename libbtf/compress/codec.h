@@ -1,0 +1,199 @@
+#pragma once
+// BTF codecs: per-view PCA (Sattler et al. 2003) and local PCA (Mueller et al. 2003, as described
+// in Schneider 2004 section 3), their file format "libbtf-codec" (docs/format.md) and decoders.
+//
+// Stable public API (btf-eval and btf-compress code against it):
+//   Compress / CompressFile      dataset (memory or file, streamed) + CompressOptions -> Codec
+//   WriteCodec / ReadCodec       codec file I/O (atomic write; versioned like the dataset format)
+//   Codec::Decode*               whole BTF, one view slot, one image, one texel ABRDF, one value
+//   Codec::StoredBytes, RawBytes sizes; Codec::views()/lights() the samplings
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "libbtf/compress/scene.h"
+#include "libbtf/core/dataset.h"
+#include "libbtf/core/progress.h"
+#include "libbtf/core/timer.h"
+
+namespace btf {
+
+inline constexpr const char* kCodecFormat = "libbtf-codec";
+inline constexpr const char* kCodecFormatVersion = "1.0.0";
+inline constexpr int kCodecFormatMajor = 1;
+
+enum class CodecMethod { kPcaView, kLpca };
+// "pca-view" / "lpca".
+std::string MethodName(CodecMethod method);
+// Throws btf::Error (usage) for unknown names.
+CodecMethod ParseMethod(const std::string& name);
+
+// Value transform applied before the decomposition and undone after reconstruction.
+// kLog: y = log(x + epsilon); decoding gives exp(y) - epsilon. Inputs must be > -epsilon.
+enum class ValueTransform { kNone, kLog };
+
+struct CompressOptions {
+  CodecMethod method = CodecMethod::kPcaView;
+  // Components c: per view slot (pca-view) or per cluster (lpca). With an error or energy target
+  // this is the maximum. Clamped (with a warning) to what the data allows: pca-view at most
+  // lights - 1 per slot, lpca at most (cluster size - 1). Components whose eigenvalue is below
+  // 1e-12 of the slot's (cluster's) largest are dropped (rank-deficient or constant data).
+  int components = 16;
+  // LPCA clusters k; clamped (with a warning) to the number of texels.
+  int clusters = 32;
+  // If > 0: the smallest c (<= components) whose relative RMS error ||X - X'|| / ||X|| (in the
+  // transformed domain) is <= target_error, chosen per slot / per cluster.
+  double target_error = 0;
+  // If > 0 (and < 1): the smallest c retaining this fraction of the centred variance.
+  double retained_energy = 0;
+  std::uint64_t seed = 1;  // k-means++ seeding and randomised SVD (deterministic for a seed)
+  bool log_transform = false;
+  double log_epsilon = 1e-3;  // epsilon of the log transform, in data units (1/sr)
+  int max_iterations = 20;    // LPCA: PCA/reassignment rounds at most
+  // LPCA stops when an iteration improves the relative error by less than this fraction.
+  double min_improvement = 1e-3;
+  // Decomposition choice: Gram matrix of the smaller side (double) when min(n, d) <= this,
+  // randomised SVD (c + 10 oversampling, 2 power iterations) otherwise.
+  int gram_limit = 1024;
+  std::optional<SceneSpec> scene;  // keep only what a scene needs (scene.h)
+  void Check() const;
+};
+
+struct CompressSummary {
+  std::string method;
+  std::string input;  // dataset path or "in-memory dataset"
+  int views = 0, lights = 0, height = 0, width = 0, channels = 0;
+  int components = 0;                  // the maximum stored per slot / cluster
+  std::vector<int> slot_components;    // pca-view: per view slot; lpca: per cluster
+  int clusters = 0;                    // lpca
+  std::vector<double> iteration_errors;  // lpca: relative error after each PCA/reassignment round
+  std::vector<int> iteration_changes;    // lpca: texels that changed cluster in each round
+  std::uint64_t codec_bytes = 0;         // Codec::StoredBytes()
+  std::uint64_t raw_float32_bytes = 0, raw_half_bytes = 0;  // of the encoded (possibly reduced) BTF
+  double ratio_float32 = 0, ratio_half = 0;
+  // Errors of the decoded codec against its input, in the original (untransformed) domain.
+  double rmse = 0, relative_error = 0, max_abs_error = 0;
+  double psnr_db = 0, psnr_peak = 0;  // PSNR = 20 log10(peak / rmse), peak = max |input value|
+  std::string psnr_peak_definition = "max |input value|";
+  std::vector<std::string> warnings;
+  // With a scene: what the full (scene-less) input would have taken at the same components.
+  bool scene_used = false;
+  int input_views = 0, input_lights = 0, input_height = 0, input_width = 0, input_channels = 0;
+  std::uint64_t full_codec_bytes = 0, bytes_saved = 0;
+  PhaseTimes times;
+  nlohmann::json ToJson() const;
+};
+
+// Per-view PCA of one view slot: the lights' images (H*W*C vectors) are the observations.
+// value(l, t) = mean[t] + sum_k weights[l*c + k] * basis[k*D + t]   (D = H*W*C, t = texel*C + ch)
+struct PcaViewSlot {
+  int components = 0;
+  std::vector<float> mean;     // D: the mean image ("mean normtexture")
+  std::vector<float> basis;    // c x D: eigen-normtextures, orthonormal
+  std::vector<float> weights;  // L x c: per-light weights
+  std::vector<double> eigenvalues;  // c: variance captured by each component (sum of squares)
+};
+
+// Local PCA: ABRDF vectors (d = V*L*C, index (v*L + l)*C + ch) clustered into k clusters.
+// value(texel, i) = means[k*d + i] + sum_j weights[texel*c + j] * basis[(k*c + j)*d + i],
+// k = cluster_of[texel]; components beyond cluster_components[k] are stored as zeros.
+struct LpcaModel {
+  int clusters = 0, components = 0;  // components = c, the stride of basis and weights
+  std::vector<float> means;          // k x d
+  std::vector<float> basis;          // k x c x d, orthonormal per cluster
+  std::vector<std::int32_t> cluster_components;  // k
+  std::vector<std::int32_t> cluster_of;          // H*W (row-major, row 0 = top)
+  std::vector<float> weights;                    // H*W x c
+};
+
+enum class UvFilter { kNearest, kBilinear };
+
+class Codec {
+ public:
+  Codec() = default;
+
+  CodecMethod method() const { return method_; }
+  const Sampling& views() const { return views_; }
+  const Sampling& lights() const { return lights_; }
+  int num_views() const { return views_.size(); }
+  int num_lights() const { return lights_.size(); }
+  int height() const { return height_; }
+  int width() const { return width_; }
+  int channels() const { return channels_; }
+  const DatasetInfo& info() const { return info_; }
+  ValueTransform transform() const { return transform_; }
+  double log_epsilon() const { return log_epsilon_; }
+  const std::vector<PcaViewSlot>& pca_view() const { return slots_; }
+  const LpcaModel& lpca() const { return lpca_; }
+  // Options and summary of the compression that made it (JSON, stored in the file).
+  const nlohmann::json& provenance() const { return provenance_; }
+
+  std::size_t image_size() const { return std::size_t(height_) * width_ * channels_; }
+  std::size_t abrdf_size() const { return std::size_t(num_views()) * num_lights() * channels_; }
+  // Bytes of the coefficient arrays (float32 / int32 as stored); sampling tables not counted.
+  std::uint64_t StoredBytes() const;
+  // Bytes of the decoded BTF as float32 / float16.
+  std::uint64_t RawBytes(int bytes_per_value = 4) const;
+
+  // Decoders (values in the original domain; transform undone).
+  Dataset DecodeAll() const;
+  void DecodeViewSlot(int view, float* out) const;            // L x H x W x C
+  void DecodeImage(int view, int light, float* out) const;    // H x W x C
+  std::vector<float> DecodeAbrdf(int y, int x) const;         // V x L x C (Dataset::Abrdf layout)
+  // Value at texture coordinates uv (wrapping: the tile repeats), light direction wi and view
+  // direction wo (both leaving the surface): barycentric over the three nearest sampled view and
+  // light directions (9 pairs), nearest or bilinear in uv. out: C floats.
+  void Value(const Vec2& uv, const Vec3& wi, const Vec3& wo, float* out, UvFilter filter = UvFilter::kBilinear) const;
+
+  // btf-info's summary.
+  nlohmann::json Describe() const;
+
+ private:
+  friend class CodecBuilder;
+  float Untransform(float y) const;
+  // Value of sampled (view, light) at texel t (row-major index), transformed domain, C floats.
+  void SampleTransformed(int view, int light, std::size_t texel, float* out) const;
+
+  CodecMethod method_ = CodecMethod::kPcaView;
+  Sampling views_, lights_;
+  int height_ = 0, width_ = 0, channels_ = 0;
+  DatasetInfo info_;
+  ValueTransform transform_ = ValueTransform::kNone;
+  double log_epsilon_ = 0;
+  std::vector<PcaViewSlot> slots_;
+  LpcaModel lpca_;
+  nlohmann::json provenance_ = nlohmann::json::object();
+};
+
+// Fills the private parts of a Codec (used by the compressors and the reader).
+class CodecBuilder {
+ public:
+  static Codec Make(CodecMethod method, Sampling views, Sampling lights, int height, int width, int channels,
+                    DatasetInfo info, ValueTransform transform, double log_epsilon);
+  static std::vector<PcaViewSlot>& slots(Codec& c) { return c.slots_; }
+  static LpcaModel& lpca(Codec& c) { return c.lpca_; }
+  static nlohmann::json& provenance(Codec& c) { return c.provenance_; }
+};
+
+// Compresses an in-memory dataset. NaN/Inf anywhere gives btf::Error (bad input) naming the item.
+Codec Compress(const Dataset& dataset, const CompressOptions& options, const Reporter& reporter = {},
+               CompressSummary* summary = nullptr);
+// Compresses a dataset file. pca-view streams it view slot by view slot (memory: about three
+// view slots); lpca reads it slot by slot into a texel-major matrix (memory: the BTF once).
+Codec CompressFile(const std::filesystem::path& dataset_path, const CompressOptions& options,
+                   const Reporter& reporter = {}, CompressSummary* summary = nullptr);
+
+// Codec files ("libbtf-codec" 1.0.0, docs/format.md). Written atomically.
+void WriteCodec(const std::filesystem::path& path, const Codec& codec, const std::string& creator = "libbtf");
+// Refuses other formats, newer major versions, missing items and inconsistent shapes (bad input).
+Codec ReadCodec(const std::filesystem::path& path);
+
+// Decodes a codec file into a dataset file, view slot by view slot (atomic).
+void DecodeToDatasetFile(const Codec& codec, const std::filesystem::path& path, const Reporter& reporter = {});
+
+}  // namespace btf
