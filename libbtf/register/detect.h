@@ -1,0 +1,76 @@
+#pragma once
+// Fiducial detection with libapriltag (Debian 3.3.0).
+//
+// Corner order: AprilTag's, for the upright printed tag: left-bottom, right-bottom, right-top,
+// left-top of the detection square (the black border's outer edge); this is the board file's order.
+// Pixel convention: OpenCV's, pixel centres at integer coordinates ((0,0) = centre of the top-left
+// pixel). AprilTag reports (0.5, 0.5) for that centre; the shift is applied once, in DetectTags.
+#include <array>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "libbtf/core/directions.h"
+#include "libbtf/io/image_io.h"
+
+namespace btf {
+
+struct TagDetectorOptions {
+  std::string family = "tag36h11";  // any family libapriltag 3.3 compiles in (see TagFamilies())
+  int bits_corrected = 2;           // error-correction bits; 48h12/52h13 are capped at 1 (table size)
+  double quad_decimate = 1.0;       // 1 = full resolution (decimation biases corners, notes 1.2)
+  bool refine_edges = false;        // libapriltag's edge refinement: biased by -0.125 px in 3.3.0 (integer
+                                    // sampling; measured in tests/register/detect_test.cpp), so off
+  bool refine_corners = true;       // our own sub-pixel edge fit on the linear float image (see below)
+  double decode_sharpening = 0.25;  // libapriltag default
+  int max_hamming = 1;              // detections correcting more bits are dropped (false positives)
+  double min_decision_margin = 20;  // weaker detections are dropped
+  double border_margin_px = 2;      // tags with a corner closer than this to the image edge are dropped
+  void Check() const;
+};
+
+struct TagDetection {
+  int id = 0;
+  int hamming = 0;
+  double decision_margin = 0;
+  std::array<Vec2, 4> corners;  // px, OpenCV convention, order documented above
+  Vec2 centre = Vec2::Zero();   // px, OpenCV convention
+};
+
+// Families this build can create.
+std::vector<std::string> TagFamilies();
+
+// One libapriltag detector and family instance. Not thread-safe: use one per thread (notes 1.5).
+class TagDetector {
+ public:
+  explicit TagDetector(const TagDetectorOptions& options = {});
+  ~TagDetector();
+  TagDetector(const TagDetector&) = delete;
+  TagDetector& operator=(const TagDetector&) = delete;
+
+  // grey: row-major 8-bit, width x height, any stride >= width. Sorted by id.
+  std::vector<TagDetection> Detect(const unsigned char* grey, int width, int height, int stride) const;
+  // Converts a linear float image to 8-bit grey (see GreyForDetection) and detects.
+  std::vector<TagDetection> Detect(const Image& image) const;
+  const TagDetectorOptions& options() const { return options_; }
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+  TagDetectorOptions options_;
+};
+
+// Sub-pixel corner refinement used by Detect(const Image&) when refine_corners is set: along each
+// edge of the quad, the 50% crossing between the black border level (half a module inside) and
+// the quiet-zone level (half a module outside) is located on profiles normal to the edge in the
+// linear grey image (exact for a straight edge under any symmetric blur); a total-least-squares
+// line per edge; corners = intersections of adjacent lines. Two passes. `modules` = the family's
+// width_at_border. Returns false (corners unchanged) if an edge has too few valid profiles.
+bool RefineTagCorners(const std::vector<float>& grey, int width, int height, int modules, std::array<Vec2, 4>* corners);
+
+// Linear grey (Rec.709 luminance for 3+ channels) scaled so the 99.5th percentile maps to 255.
+// Stays linear on purpose: AprilTag thresholds at the mid level, and under a symmetric blur the
+// 50% crossing of the linear signal is the true edge (a gamma curve would move it).
+std::vector<unsigned char> GreyForDetection(const Image& image);
+
+}  // namespace btf

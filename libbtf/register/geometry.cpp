@@ -1,0 +1,185 @@
+#include "libbtf/register/geometry.h"
+
+#include <cmath>
+#include <map>
+
+#include <Eigen/LU>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/core/eigen.hpp>
+
+#include "libbtf/core/error.h"
+
+namespace btf {
+
+void GeometryOptions::Check() const {
+  BTF_CHECK_OPTION(min_markers >= 1, "min_markers", ">= 1");
+  BTF_CHECK_OPTION(std::isfinite(ransac_threshold_px) && ransac_threshold_px > 0, "ransac_threshold_px", "> 0");
+  BTF_CHECK_OPTION(std::isfinite(max_rms_px) && max_rms_px > 0, "max_rms_px", "> 0");
+}
+
+bool PhotoGeometry::Project(const Vec3& p, Vec2* px) const {
+  if (!has_pose) {
+    const Vec3 h = surface_homography * Vec3(p.x(), p.y(), 1.0);
+    if (!(h.z() > 0)) return false;
+    *px = h.head<2>() / h.z();
+    return true;
+  }
+  const Vec3 c = rotation * p + translation;
+  if (!(c.z() > 1e-9)) return false;
+  const double x = c.x() / c.z(), y = c.y() / c.z();
+  const double r2 = x * x + y * y;
+  const double f = 1 + camera.k1 * r2 + camera.k2 * r2 * r2;
+  *px = Vec2(camera.fx * x * f + camera.cx, camera.fy * y * f + camera.cy);
+  return true;
+}
+
+Eigen::Matrix3d PlaneHomography(const CameraModel& cam, const Eigen::Matrix3d& R, const Vec3& t, double plane_z) {
+  Eigen::Matrix3d K;
+  K << cam.fx, 0, cam.cx, 0, cam.fy, cam.cy, 0, 0, 1;
+  Eigen::Matrix3d M;
+  // (x, y, z0) -> R (x, y, z0) + t = r1 x + r2 y + (t + z0 r3).
+  M.col(0) = R.col(0);
+  M.col(1) = R.col(1);
+  M.col(2) = t + plane_z * R.col(2);
+  Eigen::Matrix3d H = K * M;
+  return H / H(2, 2);
+}
+
+PhotoGeometry EstimateGeometry(const Board& board, const std::vector<TagDetection>& detections,
+                               const std::optional<CameraModel>& camera, const GeometryOptions& options,
+                               std::vector<std::string>* warnings) {
+  options.Check();
+  std::map<int, const Marker*> by_id;
+  for (const auto& m : board.markers) by_id[m.id] = &m;
+  std::map<int, int> seen;
+  for (const auto& d : detections) ++seen[d.id];
+  for (const auto& [id, n] : seen)
+    if (n > 1)
+      ThrowBadInput("marker id {} detected {} times: two boards in view or a misprinted marker; remove the duplicate",
+                    id, n);
+
+  struct Use {
+    const TagDetection* det;
+    const Marker* marker;
+  };
+  std::vector<Use> uses;
+  for (const auto& d : detections) {
+    auto it = by_id.find(d.id);
+    if (it == by_id.end()) {
+      if (warnings) warnings->push_back(fmt::format("marker id {} is not on the board: ignored", d.id));
+      continue;
+    }
+    uses.push_back({&d, it->second});
+  }
+  if (static_cast<int>(uses.size()) < options.min_markers)
+    ThrowBadInput("too few markers: {} of the board's {} found, at least {} needed", uses.size(), board.markers.size(),
+                  options.min_markers);
+
+  const bool pose = camera.has_value() && camera->fx > 0 && camera->fy > 0;
+  cv::Mat K, dist;
+  if (pose) {
+    K = (cv::Mat_<double>(3, 3) << camera->fx, 0, camera->cx, 0, camera->fy, camera->cy, 0, 0, 1);
+    dist = (cv::Mat_<double>(1, 4) << camera->k1, camera->k2, 0, 0);
+  }
+  std::vector<cv::Point2f> plate_xy;
+  std::vector<cv::Point3d> plate3;
+  std::vector<cv::Point2d> image_px;
+  bool nonzero_height = false;
+  for (const auto& u : uses)
+    for (int k = 0; k < 4; ++k) {
+      plate_xy.emplace_back(static_cast<float>(u.marker->corners_mm[k].x()),
+                            static_cast<float>(u.marker->corners_mm[k].y()));
+      plate3.emplace_back(u.marker->corners_mm[k].x(), u.marker->corners_mm[k].y(), u.marker->height_mm);
+      image_px.emplace_back(u.det->corners[k].x(), u.det->corners[k].y());
+      nonzero_height |= u.marker->height_mm != 0;
+    }
+  // Undistorted pixels for the robust homography (RANSAC only screens outliers, notes 4.2).
+  std::vector<cv::Point2f> ideal;
+  if (pose) {
+    std::vector<cv::Point2d> und;
+    cv::undistortPoints(image_px, und, K, dist, cv::noArray(), K);
+    for (const auto& p : und) ideal.emplace_back(static_cast<float>(p.x), static_cast<float>(p.y));
+  } else {
+    for (const auto& p : image_px) ideal.emplace_back(static_cast<float>(p.x), static_cast<float>(p.y));
+  }
+  std::vector<unsigned char> mask;
+  cv::Mat Hr = cv::findHomography(plate_xy, ideal, cv::RANSAC, options.ransac_threshold_px, mask, 2000, 0.999);
+  if (Hr.empty()) ThrowBadInput("degenerate marker layout in the photo: no homography fits the {} corners", ideal.size());
+
+  PhotoGeometry g;
+  std::vector<cv::Point3d> in3;
+  std::vector<cv::Point2f> in_xy;
+  std::vector<cv::Point2d> in_px;
+  std::vector<cv::Point2f> in_ideal;
+  for (std::size_t i = 0; i < uses.size(); ++i) {
+    bool ok = true;
+    for (int k = 0; k < 4; ++k) ok &= mask[4 * i + k] != 0;
+    if (!ok) {
+      g.rejected_ids.push_back(uses[i].det->id);
+      if (warnings)
+        warnings->push_back(fmt::format("marker id {} rejected: its corners disagree with the other markers by more "
+                                        "than {} px",
+                                        uses[i].det->id, options.ransac_threshold_px));
+      continue;
+    }
+    g.used_ids.push_back(uses[i].det->id);
+    for (int k = 0; k < 4; ++k) {
+      in3.push_back(plate3[4 * i + k]);
+      in_xy.push_back(plate_xy[4 * i + k]);
+      in_px.push_back(image_px[4 * i + k]);
+      in_ideal.push_back(ideal[4 * i + k]);
+    }
+  }
+  if (static_cast<int>(g.used_ids.size()) < options.min_markers)
+    ThrowBadInput("too few consistent markers: {} after rejecting outliers, at least {} needed", g.used_ids.size(),
+                  options.min_markers);
+  g.corners_used = static_cast<int>(in3.size());
+
+  if (pose) {
+    g.has_pose = true;
+    g.camera = *camera;
+    cv::Mat rvec, tvec;
+    // SQPnP takes general 3D points (markers at different heights); then LM on all inlier corners.
+    if (!cv::solvePnP(in3, in_px, K, dist, rvec, tvec, false, cv::SOLVEPNP_SQPNP))
+      ThrowBadInput("degenerate marker layout: the camera pose cannot be solved from {} corners", in3.size());
+    cv::solvePnPRefineLM(in3, in_px, K, dist, rvec, tvec);
+    cv::Mat Rm;
+    cv::Rodrigues(rvec, Rm);
+    cv::cv2eigen(Rm, g.rotation);
+    g.translation = Vec3(tvec.at<double>(0), tvec.at<double>(1), tvec.at<double>(2));
+    g.surface_homography = PlaneHomography(g.camera, g.rotation, g.translation, 0.0);
+    double ss = 0;
+    for (std::size_t i = 0; i < in3.size(); ++i) {
+      Vec2 p;
+      if (!g.Project(Vec3(in3[i].x, in3[i].y, in3[i].z), &p))
+        ThrowBadInput("degenerate pose: a marker corner lies behind the camera");
+      ss += (p - Vec2(in_px[i].x, in_px[i].y)).squaredNorm();
+    }
+    g.rms_px = std::sqrt(ss / static_cast<double>(in3.size()));
+  } else {
+    if (nonzero_height && warnings)
+      warnings->push_back("markers sit above the material surface but no intrinsics are given: the marker-height "
+                          "parallax is not compensated");
+    // Least squares + LM on the inliers (method 0).
+    cv::Mat H = cv::findHomography(in_xy, in_ideal, 0);
+    if (H.empty()) ThrowBadInput("degenerate marker layout: the homography refit failed");
+    cv::cv2eigen(H, g.surface_homography);
+    g.surface_homography /= g.surface_homography(2, 2);
+    double ss = 0;
+    for (std::size_t i = 0; i < in_xy.size(); ++i) {
+      Vec2 p;
+      if (!g.Project(Vec3(in_xy[i].x, in_xy[i].y, 0), &p)) ThrowBadInput("degenerate homography: corner at infinity");
+      ss += (p - Vec2(in_px[i].x, in_px[i].y)).squaredNorm();
+    }
+    g.rms_px = std::sqrt(ss / static_cast<double>(in_xy.size()));
+  }
+  if (!g.surface_homography.allFinite() || std::abs(g.surface_homography.determinant()) < 1e-12)
+    ThrowBadInput("degenerate homography (singular or not finite)");
+  if (!(g.rms_px <= options.max_rms_px))
+    ThrowBadInput("reprojection RMS {:.3f} px exceeds the limit {} px: markers misdetected or the board does not match",
+                  g.rms_px, options.max_rms_px);
+  return g;
+}
+
+}  // namespace btf
