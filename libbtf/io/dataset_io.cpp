@@ -199,4 +199,9 @@ Dataset ReadDataset(const std::filesystem::path& path) {
   return d;
 }
 
+void WriteSamplingTables(const h5::File& file, const std::string& prefix, const Sampling& sampling) {
+  WriteSampling(file, prefix, sampling);
+}
+Sampling ReadSamplingTables(const h5::File& file, const std::string& prefix) { return ReadSampling(file, prefix); }
+
 }  // namespace btf

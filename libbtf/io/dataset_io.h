@@ -31,6 +31,11 @@ struct DatasetHeader {
 void WriteDataset(const std::filesystem::path& path, const Dataset& dataset, const DatasetWriteOptions& options = {});
 Dataset ReadDataset(const std::filesystem::path& path);
 
+// The sampling tables PREFIX_directions / PREFIX_angles as in the dataset format (also used by
+// the codec format). Reading checks shape and unit length (bad input naming the file).
+void WriteSamplingTables(const h5::File& file, const std::string& prefix, const Sampling& sampling);
+Sampling ReadSamplingTables(const h5::File& file, const std::string& prefix);
+
 // Random access without reading the whole file: one image or one view slot at a time.
 class DatasetReader {
  public:

@@ -1,0 +1,302 @@
+#include "libbtf/compress/codec.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <Eigen/Core>
+
+#include "libbtf/core/error.h"
+
+namespace btf {
+
+namespace {
+using RowMajorF = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+}
+
+std::string MethodName(CodecMethod method) { return method == CodecMethod::kPcaView ? "pca-view" : "lpca"; }
+
+CodecMethod ParseMethod(const std::string& name) {
+  if (name == "pca-view") return CodecMethod::kPcaView;
+  if (name == "lpca") return CodecMethod::kLpca;
+  ThrowUsage("unknown compression method '{}' (use pca-view or lpca)", name);
+}
+
+void CompressOptions::Check() const {
+  BTF_CHECK_OPTION(components >= 1 && components <= 4096, "components", "must be 1..4096");
+  BTF_CHECK_OPTION(clusters >= 1 && clusters <= 65535, "clusters", "must be 1..65535");
+  BTF_CHECK_OPTION(target_error >= 0 && target_error < 1, "error", "a relative RMS error in [0, 1)");
+  BTF_CHECK_OPTION(retained_energy >= 0 && retained_energy <= 1, "energy", "a fraction in [0, 1]");
+  BTF_CHECK_OPTION(!(target_error > 0 && retained_energy > 0), "error/energy", "give at most one of the two");
+  BTF_CHECK_OPTION(log_epsilon > 0 && std::isfinite(log_epsilon), "log_epsilon", "must be > 0");
+  BTF_CHECK_OPTION(max_iterations >= 0 && max_iterations <= 1000, "max_iterations", "must be 0..1000");
+  BTF_CHECK_OPTION(min_improvement >= 0 && min_improvement < 1, "min_improvement", "must be in [0, 1)");
+  BTF_CHECK_OPTION(gram_limit >= 1, "gram_limit", "must be >= 1");
+}
+
+nlohmann::json CompressSummary::ToJson() const {
+  nlohmann::json j;
+  j["method"] = method;
+  j["input"] = input;
+  j["shape"] = {{"views", views}, {"lights", lights}, {"height", height}, {"width", width}, {"channels", channels}};
+  j["components"] = components;
+  j[method == "lpca" ? "cluster_components" : "slot_components"] = slot_components;
+  if (method == "lpca") {
+    j["clusters"] = clusters;
+    j["iteration_relative_errors"] = iteration_errors;
+    j["iteration_reassigned_texels"] = iteration_changes;
+  }
+  j["codec_bytes"] = codec_bytes;
+  j["raw_float32_bytes"] = raw_float32_bytes;
+  j["raw_half_bytes"] = raw_half_bytes;
+  j["ratio_vs_float32"] = ratio_float32;
+  j["ratio_vs_half"] = ratio_half;
+  j["rmse"] = rmse;
+  j["relative_error"] = relative_error;
+  j["max_abs_error"] = max_abs_error;
+  j["psnr_db"] = psnr_db;
+  j["psnr_peak"] = psnr_peak;
+  j["psnr_peak_definition"] = psnr_peak_definition;
+  j["warnings"] = warnings;
+  if (scene_used) {
+    j["scene"] = {{"input_shape",
+                   {{"views", input_views}, {"lights", input_lights}, {"height", input_height},
+                    {"width", input_width}, {"channels", input_channels}}},
+                  {"full_codec_bytes", full_codec_bytes},
+                  {"bytes_saved", bytes_saved},
+                  {"error_on_used_directions", relative_error}};
+  }
+  j["seconds"] = times.ToJson();
+  j["seconds_total"] = times.Total();
+  return j;
+}
+
+Codec CodecBuilder::Make(CodecMethod method, Sampling views, Sampling lights, int height, int width, int channels,
+                         DatasetInfo info, ValueTransform transform, double log_epsilon) {
+  Codec c;
+  c.method_ = method;
+  c.views_ = std::move(views);
+  c.lights_ = std::move(lights);
+  c.height_ = height;
+  c.width_ = width;
+  c.channels_ = channels;
+  c.info_ = std::move(info);
+  c.transform_ = transform;
+  c.log_epsilon_ = log_epsilon;
+  return c;
+}
+
+std::uint64_t Codec::StoredBytes() const {
+  std::uint64_t values = 0;
+  if (method_ == CodecMethod::kPcaView) {
+    for (const auto& s : slots_) values += s.mean.size() + s.basis.size() + s.weights.size();
+  } else {
+    values = lpca_.means.size() + lpca_.basis.size() + lpca_.weights.size() + lpca_.cluster_of.size() +
+             lpca_.cluster_components.size();
+  }
+  return values * 4;
+}
+
+std::uint64_t Codec::RawBytes(int bytes_per_value) const {
+  return std::uint64_t(num_views()) * num_lights() * image_size() * std::uint64_t(bytes_per_value);
+}
+
+float Codec::Untransform(float y) const {
+  if (transform_ == ValueTransform::kLog) return static_cast<float>(std::exp(double(y)) - log_epsilon_);
+  return y;
+}
+
+void Codec::SampleTransformed(int view, int light, std::size_t texel, float* out) const {
+  const int C = channels_;
+  if (method_ == CodecMethod::kPcaView) {
+    const PcaViewSlot& s = slots_[static_cast<std::size_t>(view)];
+    const std::size_t D = image_size();
+    for (int ch = 0; ch < C; ++ch) {
+      const std::size_t t = texel * C + ch;
+      double v = s.mean[t];
+      for (int k = 0; k < s.components; ++k)
+        v += double(s.weights[std::size_t(light) * s.components + k]) * s.basis[std::size_t(k) * D + t];
+      out[ch] = static_cast<float>(v);
+    }
+  } else {
+    const LpcaModel& m = lpca_;
+    const std::size_t d = abrdf_size();
+    const int k = m.cluster_of[texel];
+    const std::size_t base = (std::size_t(view) * num_lights() + light) * C;
+    for (int ch = 0; ch < C; ++ch) {
+      double v = m.means[std::size_t(k) * d + base + ch];
+      for (int j = 0; j < m.cluster_components[static_cast<std::size_t>(k)]; ++j)
+        v += double(m.weights[texel * m.components + j]) *
+             m.basis[(std::size_t(k) * m.components + j) * d + base + ch];
+      out[ch] = static_cast<float>(v);
+    }
+  }
+}
+
+void Codec::DecodeViewSlot(int view, float* out) const {
+  if (view < 0 || view >= num_views()) ThrowUsage("view {} out of range (codec has {} views)", view, num_views());
+  const int L = num_lights(), C = channels_;
+  const std::size_t D = image_size(), T = std::size_t(height_) * width_;
+  if (method_ == CodecMethod::kPcaView) {
+    const PcaViewSlot& s = slots_[static_cast<std::size_t>(view)];
+    Eigen::Map<RowMajorF> o(out, L, static_cast<Eigen::Index>(D));
+    const Eigen::Map<const Eigen::VectorXf> mean(s.mean.data(), static_cast<Eigen::Index>(D));
+    if (s.components > 0) {
+      const Eigen::Map<const RowMajorF> w(s.weights.data(), L, s.components);
+      const Eigen::Map<const RowMajorF> b(s.basis.data(), s.components, static_cast<Eigen::Index>(D));
+      o.noalias() = w * b;
+      o.rowwise() += mean.transpose();
+    } else {
+      o.rowwise() = mean.transpose();
+    }
+  } else {
+    const LpcaModel& m = lpca_;
+    const std::size_t d = abrdf_size(), seg = std::size_t(L) * C, base = std::size_t(view) * seg;
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t ti = 0; ti < static_cast<std::ptrdiff_t>(T); ++ti) {
+      const std::size_t t = static_cast<std::size_t>(ti);
+      const int k = m.cluster_of[t];
+      Eigen::VectorXf v = Eigen::Map<const Eigen::VectorXf>(&m.means[std::size_t(k) * d + base], seg);
+      for (int j = 0; j < m.cluster_components[static_cast<std::size_t>(k)]; ++j)
+        v += m.weights[t * m.components + j] *
+             Eigen::Map<const Eigen::VectorXf>(&m.basis[(std::size_t(k) * m.components + j) * d + base], seg);
+      for (int l = 0; l < L; ++l)
+        for (int ch = 0; ch < C; ++ch) out[(std::size_t(l) * T + t) * C + ch] = v[l * C + ch];
+    }
+  }
+  if (transform_ != ValueTransform::kNone) {
+    const std::size_t n = std::size_t(L) * D;
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(n); ++i) out[i] = Untransform(out[i]);
+  }
+}
+
+void Codec::DecodeImage(int view, int light, float* out) const {
+  if (view < 0 || view >= num_views() || light < 0 || light >= num_lights())
+    ThrowUsage("image (view {}, light {}) out of range (codec has {} views, {} lights)", view, light, num_views(),
+               num_lights());
+  const std::size_t D = image_size(), T = std::size_t(height_) * width_;
+  if (method_ == CodecMethod::kPcaView) {
+    const PcaViewSlot& s = slots_[static_cast<std::size_t>(view)];
+    Eigen::Map<Eigen::VectorXf> o(out, static_cast<Eigen::Index>(D));
+    o = Eigen::Map<const Eigen::VectorXf>(s.mean.data(), static_cast<Eigen::Index>(D));
+    if (s.components > 0) {
+      const Eigen::Map<const RowMajorF> b(s.basis.data(), s.components, static_cast<Eigen::Index>(D));
+      const Eigen::Map<const Eigen::VectorXf> w(&s.weights[std::size_t(light) * s.components], s.components);
+      o.noalias() += b.transpose() * w;
+    }
+    if (transform_ != ValueTransform::kNone)
+      for (std::size_t i = 0; i < D; ++i) out[i] = Untransform(out[i]);
+  } else {
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t t = 0; t < static_cast<std::ptrdiff_t>(T); ++t) {
+      SampleTransformed(view, light, static_cast<std::size_t>(t), out + t * channels_);
+      for (int ch = 0; ch < channels_; ++ch) out[t * channels_ + ch] = Untransform(out[t * channels_ + ch]);
+    }
+  }
+}
+
+std::vector<float> Codec::DecodeAbrdf(int y, int x) const {
+  if (y < 0 || y >= height_ || x < 0 || x >= width_)
+    ThrowUsage("texel (x {}, y {}) out of range ({} x {})", x, y, width_, height_);
+  const std::size_t t = std::size_t(y) * width_ + x;
+  std::vector<float> out(abrdf_size());
+  const int C = channels_;
+  if (method_ == CodecMethod::kLpca) {
+    const LpcaModel& m = lpca_;
+    const std::size_t d = abrdf_size();
+    const int k = m.cluster_of[t];
+    Eigen::Map<Eigen::VectorXf> o(out.data(), static_cast<Eigen::Index>(d));
+    o = Eigen::Map<const Eigen::VectorXf>(&m.means[std::size_t(k) * d], static_cast<Eigen::Index>(d));
+    for (int j = 0; j < m.cluster_components[static_cast<std::size_t>(k)]; ++j)
+      o += m.weights[t * m.components + j] *
+           Eigen::Map<const Eigen::VectorXf>(&m.basis[(std::size_t(k) * m.components + j) * d],
+                                             static_cast<Eigen::Index>(d));
+    for (auto& v : out) v = Untransform(v);
+  } else {
+    for (int v = 0; v < num_views(); ++v)
+      for (int l = 0; l < num_lights(); ++l) {
+        float* o = &out[(std::size_t(v) * num_lights() + l) * C];
+        SampleTransformed(v, l, t, o);
+        for (int ch = 0; ch < C; ++ch) o[ch] = Untransform(o[ch]);
+      }
+  }
+  return out;
+}
+
+Dataset Codec::DecodeAll() const {
+  CheckAllocation(RawBytes(4), "decoded BTF");
+  Dataset d(views_, lights_, height_, width_, channels_, info_);
+  for (int v = 0; v < num_views(); ++v) DecodeViewSlot(v, d.view_slot(v).data());
+  return d;
+}
+
+void Codec::Value(const Vec2& uv, const Vec3& wi, const Vec3& wo, float* out, UvFilter filter) const {
+  if (!uv.allFinite() || !wi.allFinite() || !wo.allFinite() || wi.norm() == 0 || wo.norm() == 0)
+    ThrowUsage("Codec::Value needs finite uv and non-zero finite directions");
+  const Interpolant iv = views_.Barycentric(wo), il = lights_.Barycentric(wi);
+  // Texel taps: continuous texel coordinates (texel centres at integers), wrapped.
+  struct Tap {
+    std::size_t texel;
+    double weight;
+  };
+  std::vector<Tap> taps;
+  const double fx = uv.x() * width_ - 0.5, fy = (1.0 - uv.y()) * height_ - 0.5;
+  auto wrap = [](long long i, int n) { return static_cast<int>(((i % n) + n) % n); };
+  if (filter == UvFilter::kNearest) {
+    const int x = wrap(std::llround(fx), width_), y = wrap(std::llround(fy), height_);
+    taps.push_back({std::size_t(y) * width_ + x, 1.0});
+  } else {
+    const double x0 = std::floor(fx), y0 = std::floor(fy), ax = fx - x0, ay = fy - y0;
+    for (int dy = 0; dy < 2; ++dy)
+      for (int dx = 0; dx < 2; ++dx) {
+        const double w = (dx ? ax : 1 - ax) * (dy ? ay : 1 - ay);
+        if (w <= 0) continue;
+        const int x = wrap(static_cast<long long>(x0) + dx, width_), y = wrap(static_cast<long long>(y0) + dy, height_);
+        taps.push_back({std::size_t(y) * width_ + x, w});
+      }
+  }
+  std::vector<double> acc(static_cast<std::size_t>(channels_), 0.0);
+  std::vector<float> s(static_cast<std::size_t>(channels_));
+  for (const Tap& tap : taps)
+    for (int a = 0; a < iv.count; ++a)
+      for (int b = 0; b < il.count; ++b) {
+        const double w = tap.weight * iv.weight[static_cast<std::size_t>(a)] * il.weight[static_cast<std::size_t>(b)];
+        if (w <= 0) continue;
+        SampleTransformed(iv.index[static_cast<std::size_t>(a)], il.index[static_cast<std::size_t>(b)], tap.texel,
+                          s.data());
+        for (int ch = 0; ch < channels_; ++ch) acc[static_cast<std::size_t>(ch)] += w * Untransform(s[static_cast<std::size_t>(ch)]);
+      }
+  for (int ch = 0; ch < channels_; ++ch) out[ch] = static_cast<float>(acc[static_cast<std::size_t>(ch)]);
+}
+
+nlohmann::json Codec::Describe() const {
+  nlohmann::json j;
+  j["format"] = kCodecFormat;
+  j["method"] = MethodName(method_);
+  j["shape"] = {{"views", num_views()}, {"lights", num_lights()}, {"height", height_}, {"width", width_},
+                {"channels", channels_}};
+  j["view_sampling"] = {{"name", views_.name()}, {"count", views_.size()}};
+  j["light_sampling"] = {{"name", lights_.name()}, {"count", lights_.size()}};
+  if (method_ == CodecMethod::kPcaView) {
+    int lo = 1 << 30, hi = 0;
+    for (const auto& s : slots_) lo = std::min(lo, s.components), hi = std::max(hi, s.components);
+    j["components_per_slot"] = {{"min", slots_.empty() ? 0 : lo}, {"max", hi}};
+  } else {
+    j["clusters"] = lpca_.clusters;
+    j["components"] = lpca_.components;
+  }
+  j["stored_bytes"] = StoredBytes();
+  j["raw_float32_bytes"] = RawBytes(4);
+  j["raw_half_bytes"] = RawBytes(2);
+  j["ratio_vs_float32"] = StoredBytes() ? double(RawBytes(4)) / double(StoredBytes()) : 0.0;
+  j["ratio_vs_half"] = StoredBytes() ? double(RawBytes(2)) / double(StoredBytes()) : 0.0;
+  j["transform"] = transform_ == ValueTransform::kLog ? nlohmann::json{{"kind", "log"}, {"epsilon", log_epsilon_}}
+                                                      : nlohmann::json{{"kind", "none"}};
+  j["color_space"] = info_.color_space;
+  j["units"] = info_.units;
+  j["cos_theta_i_included"] = info_.cos_theta_i_included;
+  j["channel_names"] = info_.channel_names;
+  return j;
+}
+
+}  // namespace btf

@@ -1,0 +1,135 @@
+#include "libbtf/compress/scene.h"
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <set>
+
+#include <Eigen/Geometry>
+
+#include "libbtf/core/error.h"
+
+namespace btf {
+
+namespace {
+
+DirectionCone ParseCone(const nlohmann::json& j, const std::string& where) {
+  if (!j.is_object()) ThrowBadInput("{}: must be an object {{\"theta_deg\", \"phi_deg\", \"cone_deg\"}}", where);
+  for (const auto& [key, value] : j.items())
+    if (key != "theta_deg" && key != "phi_deg" && key != "cone_deg")
+      ThrowBadInput("{}: unknown key '{}' (allowed: theta_deg, phi_deg, cone_deg)", where, key);
+  auto number = [&](const char* key, double fallback) {
+    if (!j.contains(key)) return fallback;
+    if (!j[key].is_number()) ThrowBadInput("{}: '{}' must be a number", where, key);
+    const double v = j[key].get<double>();
+    if (!std::isfinite(v)) ThrowBadInput("{}: '{}' must be finite", where, key);
+    return v;
+  };
+  if (!j.contains("theta_deg")) ThrowBadInput("{}: 'theta_deg' is required", where);
+  const double theta = number("theta_deg", 0), phi = number("phi_deg", 0), cone = number("cone_deg", 0);
+  if (theta < 0 || theta > 90) ThrowBadInput("{}: theta_deg {} is outside [0, 90]", where, theta);
+  if (cone < 0 || cone > 180) ThrowBadInput("{}: cone_deg {} is outside [0, 180]", where, cone);
+  return {DirectionFromAngles(DegToRad(theta), DegToRad(phi)), DegToRad(cone)};
+}
+
+std::vector<DirectionCone> ParseCones(const nlohmann::json& j, const std::string& where) {
+  if (j.is_string() && j.get<std::string>() == "all") return {};
+  if (!j.is_array() || j.empty()) ThrowBadInput("{}: must be \"all\" or a non-empty array of cones", where);
+  std::vector<DirectionCone> cones;
+  for (std::size_t i = 0; i < j.size(); ++i) cones.push_back(ParseCone(j[i], fmt::format("{}[{}]", where, i)));
+  return cones;
+}
+
+nlohmann::json ConesJson(const std::vector<DirectionCone>& cones) {
+  if (cones.empty()) return "all";
+  nlohmann::json a = nlohmann::json::array();
+  for (const auto& c : cones) {
+    const Angles an = AnglesFromDirection(c.direction);
+    a.push_back({{"theta_deg", RadToDeg(an.theta)}, {"phi_deg", RadToDeg(an.phi)}, {"cone_deg", RadToDeg(c.half_angle)}});
+  }
+  return a;
+}
+
+}  // namespace
+
+SceneSpec SceneSpec::FromJson(const nlohmann::json& j, const std::string& source) {
+  if (!j.is_object()) ThrowBadInput("scene '{}': must be a JSON object", source);
+  SceneSpec s;
+  for (const auto& [key, value] : j.items()) {
+    const std::string where = fmt::format("scene '{}': '{}'", source, key);
+    if (key == "format" || key == "comment") continue;
+    if (key == "views") {
+      s.views = ParseCones(value, where);
+    } else if (key == "lights") {
+      s.lights = ParseCones(value, where);
+    } else if (key == "mip_level") {
+      if (!value.is_number_integer() || value.get<int>() < 0 || value.get<int>() > 16)
+        ThrowBadInput("{}: must be an integer 0..16", where);
+      s.mip_level = value.get<int>();
+    } else if (key == "channels") {
+      if (value.is_string() && value.get<std::string>() == "all") continue;
+      if (!value.is_array() || value.empty()) ThrowBadInput("{}: must be \"all\" or a non-empty array of names", where);
+      for (const auto& c : value) {
+        if (!c.is_string()) ThrowBadInput("{}: channel names must be strings", where);
+        s.channels.push_back(c.get<std::string>());
+      }
+    } else if (key == "max_relative_error") {
+      if (!value.is_number() || !(value.get<double>() >= 0) || value.get<double>() >= 1)
+        ThrowBadInput("{}: must be a number in [0, 1)", where);
+      s.max_relative_error = value.get<double>();
+    } else {
+      ThrowBadInput("{}: unknown key (allowed: views, lights, mip_level, channels, max_relative_error, comment)",
+                    where);
+    }
+  }
+  return s;
+}
+
+SceneSpec SceneSpec::Load(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  if (!in) ThrowIo("cannot open scene file '{}'", path.string());
+  const nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
+  if (j.is_discarded()) ThrowBadInput("scene '{}' is not valid JSON", path.string());
+  return FromJson(j, path.string());
+}
+
+nlohmann::json SceneSpec::ToJson() const {
+  nlohmann::json j;
+  j["views"] = ConesJson(views);
+  j["lights"] = ConesJson(lights);
+  j["mip_level"] = mip_level;
+  j["channels"] = channels.empty() ? nlohmann::json("all") : nlohmann::json(channels);
+  j["max_relative_error"] = max_relative_error;
+  return j;
+}
+
+std::vector<int> NeededDirections(const Sampling& sampling, const std::vector<DirectionCone>& cones) {
+  std::vector<int> all(static_cast<std::size_t>(sampling.size()));
+  for (int i = 0; i < sampling.size(); ++i) all[static_cast<std::size_t>(i)] = i;
+  if (cones.empty()) return all;
+  std::set<int> used;
+  auto add = [&](const Vec3& d) {
+    if (d.z() < 0) return;  // below the horizon: not a direction the BTF describes
+    const Interpolant ip = sampling.Barycentric(d);
+    for (int k = 0; k < ip.count; ++k)
+      if (ip.count == 1 || ip.weight[static_cast<std::size_t>(k)] > 0) used.insert(ip.index[static_cast<std::size_t>(k)]);
+  };
+  for (const auto& cone : cones) {
+    const Vec3 axis = cone.direction.normalized();
+    add(axis);
+    if (cone.half_angle <= 0) continue;
+    // Orthonormal frame around the axis.
+    const Vec3 helper = std::abs(axis.z()) < 0.9 ? Vec3(0, 0, 1) : Vec3(1, 0, 0);
+    const Vec3 a = axis.cross(helper).normalized(), b = axis.cross(a);
+    for (int ring = 1; ring <= 4; ++ring) {
+      const double t = cone.half_angle * ring / 4.0;
+      for (int k = 0; k < 24; ++k) {
+        const double p = 2 * kPi * k / 24.0;
+        add(std::cos(t) * axis + std::sin(t) * (std::cos(p) * a + std::sin(p) * b));
+      }
+    }
+  }
+  return {used.begin(), used.end()};
+}
+
+}  // namespace btf

@@ -1,0 +1,441 @@
+#include "libbtf/compress/codec.h"
+
+#include <gtest/gtest.h>
+#include <hdf5.h>
+
+#include <cmath>
+#include <limits>
+#include <map>
+#include <set>
+
+#include "libbtf/compress/pca.h"
+#include "libbtf/core/error.h"
+#include "libbtf/io/dataset_io.h"
+#include "tests/compress/synthetic.h"
+#include "tests/test_util.h"
+
+namespace btf {
+namespace {
+
+CompressOptions PcaView(int c) {
+  CompressOptions o;
+  o.method = CodecMethod::kPcaView;
+  o.components = c;
+  return o;
+}
+CompressOptions Lpca(int k, int c) {
+  CompressOptions o;
+  o.method = CodecMethod::kLpca;
+  o.clusters = k;
+  o.components = c;
+  return o;
+}
+
+// --- PCA kernel -----------------------------------------------------------------------------
+
+TEST(Pca, GramCovarianceRandomisedAndFullSvdAgreeOnLowRankData) {
+  // 60 x 300 matrix of exact rank 5 around a mean: every path must capture all the energy.
+  std::mt19937_64 rng(1);
+  std::uniform_real_distribution<float> uni(-1, 1);
+  RowMatrixXf U(60, 5), V(5, 300);
+  for (int i = 0; i < U.size(); ++i) U.data()[i] = uni(rng);
+  for (int i = 0; i < V.size(); ++i) V.data()[i] = uni(rng);
+  RowMatrixXf X = U * V;
+  X.array() += 2.0f;
+  PcaRequest q;
+  q.max_components = 8;
+  const PcaResult gram = Pca(X, q);  // n = 60 <= d: Gram of the rows
+  const RowMatrixXf Xt = X.transpose();
+  const PcaResult cov = Pca(Xt.topRows(300), q);  // n = 300 > d = 60: covariance
+  q.gram_limit = 10;                               // force the randomised path (min side 60 > 10)
+  const PcaResult rnd = Pca(X, q);
+  const PcaResult svd = PcaFullSvd(X, 5);
+  EXPECT_FALSE(gram.randomised);
+  EXPECT_TRUE(rnd.randomised);
+  // Rank 5: components 6..8 have ~0 eigenvalue and are dropped.
+  EXPECT_EQ(gram.components(), 5);
+  EXPECT_EQ(rnd.components(), 5);
+  EXPECT_EQ(cov.components(), 5);
+  EXPECT_EQ(gram.dropped_null, 3);
+  // Float data: residual below 1e-9 of the energy (float rounding ~1e-14 per element squared).
+  for (const PcaResult* r : {&gram, &rnd, &svd}) EXPECT_LT(r->residual_energy, 1e-9 * r->total_energy);
+  for (int k = 0; k < 5; ++k) {
+    EXPECT_NEAR(gram.eigenvalues[k], svd.eigenvalues[k], 1e-4 * svd.eigenvalues[0]);
+    EXPECT_NEAR(rnd.eigenvalues[k], svd.eigenvalues[k], 1e-4 * svd.eigenvalues[0]);
+  }
+  // Orthonormal basis to float precision.
+  const Eigen::MatrixXf g = gram.basis * gram.basis.transpose();
+  EXPECT_LT((g - Eigen::MatrixXf::Identity(5, 5)).cwiseAbs().maxCoeff(), 1e-5);
+}
+
+TEST(Pca, ConstantDataHasNoComponents) {
+  RowMatrixXf X = RowMatrixXf::Constant(10, 50, 0.25f);
+  const PcaResult r = Pca(X, PcaRequest{});
+  EXPECT_EQ(r.components(), 0);
+  EXPECT_FLOAT_EQ(r.mean[7], 0.25f);
+  EXPECT_EQ(r.residual_energy, 0.0);
+}
+
+TEST(Pca, TargetErrorPicksTheSmallestSufficientCount) {
+  // Rows +-s_k e_k with s = 8, 4, 2, 1, 0.5 (zero mean): relative error with c components =
+  // sqrt(sum_{k>c} s_k^2 / sum s_k^2): c = 1: 0.4993, c = 2: 0.2482, c = 3: 0.1211.
+  RowMatrixXf X = RowMatrixXf::Zero(10, 20);
+  const float s[5] = {8, 4, 2, 1, 0.5f};
+  for (int k = 0; k < 5; ++k) X(2 * k, k) = s[k], X(2 * k + 1, k) = -s[k];
+  PcaRequest q;
+  q.max_components = 5;
+  q.target_error = 0.15;
+  EXPECT_EQ(Pca(X, q).components(), 3);
+  q.target_error = 0.3;
+  EXPECT_EQ(Pca(X, q).components(), 2);
+  q.target_error = 0.2482;  // just below c = 2's error
+  EXPECT_EQ(Pca(X, q).components(), 3);
+  q.target_error = 0;
+  q.retained_energy = 0.9;  // c = 2 retains 80/85.25 = 0.938
+  EXPECT_EQ(Pca(X, q).components(), 2);
+}
+
+// --- per-view PCA ---------------------------------------------------------------------------
+
+TEST(PcaView, ExactRankRecoversTheDataAndMoreComponentsNeverHurt) {
+  const Dataset d = test::PerViewLowRank(test::BonnSubset(4), test::BonnSubset(30, 2), 8, 8, 4, 1e-4);
+  double previous = 1e9;
+  for (int c : {1, 2, 3, 4, 6}) {
+    CompressSummary s;
+    const Codec codec = Compress(d, PcaView(c), {}, &s);
+    const double e = test::RelativeError(d, codec.DecodeAll());
+    // The summary's error is the decoded error (same definition, double accumulation).
+    EXPECT_NEAR(s.relative_error, e, 1e-6 * std::max(e, 1e-3));
+    EXPECT_LE(e, previous * (1 + 1e-6)) << "c = " << c;
+    previous = e;
+    if (c >= 4) {
+      // Rank 4 + noise 1e-4 on values ~1: the residual is the noise minus what 2 extra
+      // components fit: <= 1e-4 relative.
+      EXPECT_LT(e, 1e-4) << "c = " << c;
+    }
+  }
+  CompressSummary s;
+  Compress(d, PcaView(1), {}, &s);
+  EXPECT_GT(s.relative_error, 1e-3);  // one component cannot hold a rank-4 slot
+  EXPECT_GT(s.ratio_float32, 1.0);
+  EXPECT_NEAR(s.ratio_float32, 2 * s.ratio_half, 1e-9);
+  EXPECT_EQ(s.psnr_peak_definition, "max |input value|");
+  EXPECT_NEAR(s.psnr_db, 20 * std::log10(s.psnr_peak / s.rmse), 1e-9);
+}
+
+TEST(PcaView, DecodersAgree) {
+  const Dataset d = test::PerViewLowRank(test::BonnSubset(5), test::BonnSubset(20, 3), 6, 7, 3, 1e-3);
+  const Codec codec = Compress(d, PcaView(3));
+  const Dataset all = codec.DecodeAll();
+  std::vector<float> img(codec.image_size());
+  codec.DecodeImage(2, 5, img.data());
+  const auto ref = all.image(2, 5);
+  for (std::size_t i = 0; i < img.size(); ++i) EXPECT_NEAR(img[i], ref[i], 1e-5);
+  const auto abrdf = codec.DecodeAbrdf(3, 4);
+  const auto want = all.Abrdf(3, 4);
+  for (std::size_t i = 0; i < abrdf.size(); ++i) EXPECT_NEAR(abrdf[i], want[i], 1e-5);
+  // Value() at a sampled (wi, wo) pair and a texel centre reproduces the sample exactly (both filters).
+  float out[3];
+  const Vec2 uv((4 + 0.5) / 7, 1 - (3 + 0.5) / 6);
+  for (UvFilter f : {UvFilter::kNearest, UvFilter::kBilinear}) {
+    codec.Value(uv, codec.lights()[5], codec.views()[2], out, f);
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(out[c], all.at(2, 5, 3, 4, c), 1e-5);
+  }
+}
+
+TEST(PcaView, ValueInterpolatesBarycentricallyAndBilinearly) {
+  const Dataset d = test::PerViewLowRank(test::BonnSubset(19), test::BonnSubset(19), 4, 4, 2, 0);
+  const Codec codec = Compress(d, PcaView(2));
+  const Dataset all = codec.DecodeAll();
+  const Vec3 wo = DirectionFromAngles(DegToRad(20), DegToRad(40)), wi = DirectionFromAngles(DegToRad(10), DegToRad(-70));
+  const Interpolant iv = codec.views().Barycentric(wo), il = codec.lights().Barycentric(wi);
+  // Halfway between texels x = 1 and 2 of row y = 2.
+  const Vec2 uv(2.0 / 4, 1 - 2.5 / 4);
+  float out[3];
+  codec.Value(uv, wi, wo, out, UvFilter::kBilinear);
+  for (int c = 0; c < 3; ++c) {
+    double want = 0;
+    for (int a = 0; a < iv.count; ++a)
+      for (int b = 0; b < il.count; ++b)
+        for (int x : {1, 2}) want += 0.5 * iv.weight[a] * il.weight[b] * all.at(iv.index[a], il.index[b], 2, x, c);
+    EXPECT_NEAR(out[c], want, 1e-5);
+  }
+  // uv wraps: u + 1 gives the same value.
+  float wrapped[3];
+  codec.Value(uv + Vec2(1, -2), wi, wo, wrapped, UvFilter::kBilinear);
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(wrapped[c], out[c], 1e-6);
+}
+
+TEST(PcaView, ComponentsAreClampedToLightsMinusOneWithAWarning) {
+  const Dataset d = test::PerViewLowRank(test::BonnSubset(2), test::BonnSubset(5), 4, 4, 2, 1e-3);
+  CompressSummary s;
+  const Codec codec = Compress(d, PcaView(16), {}, &s);
+  ASSERT_FALSE(s.warnings.empty());
+  EXPECT_NE(s.warnings[0].find("clamped to 4"), std::string::npos);
+  for (const auto& slot : codec.pca_view()) EXPECT_LE(slot.components, 4);
+  // With all lights - 1 components the slot is reproduced to float rounding.
+  EXPECT_LT(s.relative_error, 1e-6);
+}
+
+TEST(PcaView, ConstantAndRankDeficientData) {
+  Dataset d(test::BonnSubset(3), test::BonnSubset(6), 4, 4, 3);
+  std::fill(d.data().begin(), d.data().end(), 0.7f);
+  CompressSummary s;
+  const Codec codec = Compress(d, PcaView(4), {}, &s);
+  for (const auto& slot : codec.pca_view()) EXPECT_EQ(slot.components, 0);
+  EXPECT_EQ(s.relative_error, 0.0);
+  EXPECT_TRUE(std::isinf(s.psnr_db));
+  const Dataset back = codec.DecodeAll();
+  EXPECT_EQ(back.data(), d.data());
+}
+
+TEST(PcaView, NonFiniteInputIsRefusedNamingTheItem) {
+  Dataset d = test::PerViewLowRank(test::BonnSubset(2), test::BonnSubset(5), 4, 4, 2, 1e-3);
+  d.at(1, 3, 2, 1, 0) = std::numeric_limits<float>::quiet_NaN();
+  try {
+    Compress(d, PcaView(2));
+    FAIL() << "NaN accepted";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ExitCode::kBadInput);
+    EXPECT_NE(std::string(e.what()).find("view 1, light 3, texel (x 1, y 2)"), std::string::npos) << e.what();
+  }
+  d.at(1, 3, 2, 1, 0) = std::numeric_limits<float>::infinity();
+  EXPECT_THROW(Compress(d, Lpca(2, 2)), Error);
+}
+
+TEST(PcaView, LogTransformIsRecordedAndInverted) {
+  // HDR: values spanning 1e-3 .. 1e3 (multiplicative structure, exactly rank 1 in the log domain).
+  Dataset d(test::BonnSubset(2), test::BonnSubset(8), 4, 4, 3);
+  for (int v = 0; v < 2; ++v)
+    for (int l = 0; l < 8; ++l)
+      for (int y = 0; y < 4; ++y)
+        for (int x = 0; x < 4; ++x)
+          for (int c = 0; c < 3; ++c)
+            d.at(v, l, y, x, c) = float(std::pow(10.0, (l - 4) * 0.75) * (1 + 0.1 * x + 0.05 * y + 0.2 * c));
+  CompressOptions o = PcaView(1);
+  o.log_transform = true;
+  o.log_epsilon = 1e-6;
+  CompressSummary s;
+  const Codec codec = Compress(d, o, {}, &s);
+  EXPECT_EQ(codec.transform(), ValueTransform::kLog);
+  // log(x + eps) is rank 1 up to eps / x <= 1e-3 relative: each value within 0.2 %.
+  const Dataset back = codec.DecodeAll();
+  for (std::size_t i = 0; i < d.size(); ++i) EXPECT_NEAR(back.data()[i], d.data()[i], 2e-3 * d.data()[i]);
+  const auto path = test::TempDir() / "log.h5";
+  WriteCodec(path, codec);
+  const Codec r = ReadCodec(path);
+  EXPECT_EQ(r.transform(), ValueTransform::kLog);
+  EXPECT_DOUBLE_EQ(r.log_epsilon(), 1e-6);
+  EXPECT_EQ(r.DecodeAll().data(), back.data());
+  // Values at or below -epsilon cannot be log-transformed.
+  d.at(0, 0, 0, 0, 0) = -1;
+  EXPECT_THROW(Compress(d, o), Error);
+}
+
+// --- local PCA ------------------------------------------------------------------------------
+
+TEST(Lpca, RecoversClusteredLowRankDataDeterministically) {
+  const Dataset d = test::ClusteredLowRank(test::BonnSubset(6), test::BonnSubset(6, 5), 12, 12, 3, 2);
+  CompressSummary s1, s2;
+  const Codec a = Compress(d, Lpca(3, 2), {}, &s1);
+  const Codec b = Compress(d, Lpca(3, 2), {}, &s2);
+  EXPECT_EQ(a.lpca().cluster_of, b.lpca().cluster_of);
+  EXPECT_EQ(a.lpca().weights, b.lpca().weights);
+  // Exact model: float rounding only.
+  EXPECT_LT(s1.relative_error, 1e-5) << nlohmann::json(s1.iteration_errors).dump();
+  // Each iteration's error is recorded and the kept fit is the best one.
+  ASSERT_FALSE(s1.iteration_errors.empty());
+  EXPECT_LE(s1.iteration_errors.back(), s1.iteration_errors.front() + 1e-12);
+  // Texels of one material share one cluster.
+  std::map<int, std::set<int>> clusters_of_material;
+  for (int y = 0; y < 12; ++y)
+    for (int x = 0; x < 12; ++x) clusters_of_material[(x * 7 + y * 3) % 3].insert(a.lpca().cluster_of[y * 12 + x]);
+  for (const auto& [m, ks] : clusters_of_material) EXPECT_EQ(ks.size(), 1u) << "material " << m;
+}
+
+TEST(Lpca, DecodersAgreeAndValueMatchesSamples) {
+  const Dataset d = test::ClusteredLowRank(test::BonnSubset(5), test::BonnSubset(7, 3), 6, 5, 2, 2);
+  const Codec codec = Compress(d, Lpca(3, 1));
+  const Dataset all = codec.DecodeAll();
+  std::vector<float> img(codec.image_size());
+  codec.DecodeImage(4, 6, img.data());
+  const auto ref = all.image(4, 6);
+  for (std::size_t i = 0; i < img.size(); ++i) EXPECT_NEAR(img[i], ref[i], 1e-5);
+  const auto abrdf = codec.DecodeAbrdf(5, 4);
+  const auto want = all.Abrdf(5, 4);
+  for (std::size_t i = 0; i < abrdf.size(); ++i) EXPECT_NEAR(abrdf[i], want[i], 1e-5);
+  float out[3];
+  codec.Value(Vec2((4 + 0.5) / 5, 1 - (5 + 0.5) / 6), codec.lights()[6], codec.views()[4], out, UvFilter::kNearest);
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(out[c], all.at(4, 6, 5, 4, c), 1e-5);
+}
+
+TEST(Lpca, MoreClustersThanTexelsAreClampedAndEmptyClustersReseeded) {
+  const Dataset d = test::ClusteredLowRank(test::BonnSubset(3), test::BonnSubset(4), 2, 3, 2, 1);
+  CompressSummary s;
+  const Codec codec = Compress(d, Lpca(10, 2), {}, &s);
+  EXPECT_EQ(codec.lpca().clusters, 6);
+  bool warned = false;
+  for (const auto& w : s.warnings) warned |= w.find("clamped to the number of texels 6") != std::string::npos;
+  EXPECT_TRUE(warned);
+  // One texel per cluster: every cluster is non-empty and the data is reproduced exactly.
+  std::set<int> used(codec.lpca().cluster_of.begin(), codec.lpca().cluster_of.end());
+  EXPECT_EQ(used.size(), 6u);
+  EXPECT_LT(s.relative_error, 1e-6);
+}
+
+TEST(Lpca, DuplicateTexelsLeaveNoClusterEmpty) {
+  // 16 texels with only 2 distinct ABRDFs and k = 4: seeding picks duplicate centres, and the
+  // empty clusters are re-seeded from other texels.
+  Dataset d(test::BonnSubset(2), test::BonnSubset(3), 4, 4, 3);
+  for (int y = 0; y < 4; ++y)
+    for (int x = 0; x < 4; ++x)
+      for (int v = 0; v < 2; ++v)
+        for (int l = 0; l < 3; ++l)
+          for (int c = 0; c < 3; ++c) d.at(v, l, y, x, c) = (x < 2 ? 1.0f : 2.0f) + 0.1f * (v + l + c);
+  CompressSummary s;
+  const Codec codec = Compress(d, Lpca(4, 1), {}, &s);
+  std::set<int> used(codec.lpca().cluster_of.begin(), codec.lpca().cluster_of.end());
+  EXPECT_EQ(used.size(), 4u);
+  EXPECT_LT(s.relative_error, 1e-6);
+}
+
+// --- files ----------------------------------------------------------------------------------
+
+TEST(CodecFile, RoundTripIsExactForBothMethods) {
+  const Dataset d = test::ClusteredLowRank(test::BonnSubset(4), test::BonnSubset(5, 2), 5, 6, 2, 2);
+  for (const CompressOptions& o : {PcaView(3), Lpca(2, 2)}) {
+    const auto path = test::TempDir() / "c.h5";
+    const Codec codec = Compress(d, o);
+    WriteCodec(path, codec);
+    const Codec r = ReadCodec(path);
+    EXPECT_EQ(r.method(), o.method);
+    EXPECT_EQ(r.StoredBytes(), codec.StoredBytes());
+    EXPECT_EQ(r.views().name(), codec.views().name());
+    EXPECT_EQ(r.DecodeAll().data(), codec.DecodeAll().data());
+    EXPECT_EQ(r.provenance()["options"]["method"], MethodName(o.method));
+    // decode -> dataset file round trip.
+    const auto out = test::TempDir() / "decoded.h5";
+    DecodeToDatasetFile(r, out);
+    EXPECT_EQ(ReadDataset(out).data(), codec.DecodeAll().data());
+  }
+}
+
+void SetStringAttr(const std::filesystem::path& path, const char* name, const std::string& value) {
+  const hid_t f = H5Fopen(path.c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+  ASSERT_GE(f, 0);
+  H5Adelete(f, name);
+  const hid_t type = H5Tcopy(H5T_C_S1);
+  H5Tset_size(type, value.size());
+  const hid_t space = H5Screate(H5S_SCALAR);
+  const hid_t a = H5Acreate2(f, name, type, space, H5P_DEFAULT, H5P_DEFAULT);
+  H5Awrite(a, type, value.c_str());
+  H5Aclose(a);
+  H5Sclose(space);
+  H5Tclose(type);
+  H5Fclose(f);
+}
+
+TEST(CodecFile, RefusesNewerMajorMissingItemsAndDatasets) {
+  const Dataset d = test::ClusteredLowRank(test::BonnSubset(3), test::BonnSubset(4), 4, 4, 2, 1);
+  const auto dir = test::TempDir();
+  const Codec codec = Compress(d, Lpca(2, 1));
+  WriteCodec(dir / "new.h5", codec);
+  SetStringAttr(dir / "new.h5", "format_version", "2.0.0");
+  try {
+    ReadCodec(dir / "new.h5");
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ExitCode::kBadInput);
+    EXPECT_NE(std::string(e.what()).find("newer"), std::string::npos) << e.what();
+  }
+  WriteCodec(dir / "missing.h5", codec);
+  {
+    const hid_t f = H5Fopen((dir / "missing.h5").c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+    H5Ldelete(f, "/codec/lpca/weights", H5P_DEFAULT);
+    H5Fclose(f);
+  }
+  try {
+    ReadCodec(dir / "missing.h5");
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ExitCode::kBadInput);
+    EXPECT_NE(std::string(e.what()).find("/codec/lpca/weights"), std::string::npos) << e.what();
+  }
+  WriteDataset(dir / "dataset.h5", d);
+  try {
+    ReadCodec(dir / "dataset.h5");
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ExitCode::kBadInput);
+  }
+}
+
+TEST(CodecFile, CompressFileStreamsTheSameResultAsInMemory) {
+  const Dataset d = test::PerViewLowRank(test::BonnSubset(3), test::BonnSubset(9), 5, 5, 2, 1e-3);
+  const auto path = test::TempDir() / "d.h5";
+  WriteDataset(path, d);
+  CompressSummary s;
+  const Codec a = CompressFile(path, PcaView(2), {}, &s), b = Compress(d, PcaView(2));
+  EXPECT_EQ(a.DecodeAll().data(), b.DecodeAll().data());
+  EXPECT_EQ(s.input, path.string());
+}
+
+// --- scene ----------------------------------------------------------------------------------
+
+TEST(Scene, KeepsOnlyNeededDirectionsMipAndChannels) {
+  const Dataset d = test::PerViewLowRank(Sampling::Bonn81(), test::BonnSubset(19), 8, 8, 3, 1e-4);
+  SceneSpec scene = SceneSpec::FromJson(nlohmann::json::parse(R"({
+      "views": [{"theta_deg": 30, "phi_deg": 0, "cone_deg": 5}],
+      "lights": "all", "mip_level": 1, "channels": ["G"]})"),
+                                        "test");
+  CompressOptions o = PcaView(3);
+  o.scene = scene;
+  CompressSummary s;
+  const Codec codec = Compress(d, o, {}, &s);
+  EXPECT_TRUE(s.scene_used);
+  // A 5-degree cone around a sampled direction touches it and its neighbours only.
+  EXPECT_LT(codec.num_views(), 12);
+  EXPECT_GE(codec.num_views(), 3);
+  EXPECT_EQ(codec.num_lights(), 19);
+  EXPECT_EQ(codec.height(), 4);
+  EXPECT_EQ(codec.channels(), 1);
+  EXPECT_EQ(codec.info().channel_names, std::vector<std::string>{"G"});
+  EXPECT_GT(s.bytes_saved, 0u);
+  EXPECT_EQ(s.full_codec_bytes - s.bytes_saved, s.codec_bytes);
+  // The scene direction decodes to the box-filtered green of the full data (mip 1 = 2x2 mean).
+  const Vec3 wo = DirectionFromAngles(DegToRad(30), 0);
+  const int v = Sampling::Bonn81().Nearest(wo);
+  float out[1];
+  codec.Value(Vec2(0.5 / 4, 1 - 0.5 / 4), d.lights()[2], wo, out, UvFilter::kNearest);
+  const double want = 0.25 * (d.at(v, 2, 0, 0, 1) + d.at(v, 2, 0, 1, 1) + d.at(v, 2, 1, 0, 1) + d.at(v, 2, 1, 1, 1));
+  EXPECT_NEAR(out[0], want, 1e-3);  // rank 3 + noise 1e-4, averaged: well within 1e-3
+}
+
+TEST(Scene, BadSceneFilesAreRefused) {
+  EXPECT_THROW(SceneSpec::FromJson(nlohmann::json::parse(R"({"views": [{"theta_deg": 95}]})"), "s"), Error);
+  EXPECT_THROW(SceneSpec::FromJson(nlohmann::json::parse(R"({"colour": 1})"), "s"), Error);
+  const Dataset d = test::PerViewLowRank(test::BonnSubset(3), test::BonnSubset(4), 4, 4, 1, 0);
+  CompressOptions o = PcaView(1);
+  o.scene = SceneSpec::FromJson(nlohmann::json::parse(R"({"channels": ["X"]})"), "s");
+  try {
+    Compress(d, o);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ExitCode::kBadInput);
+    EXPECT_NE(std::string(e.what()).find("'X'"), std::string::npos);
+  }
+}
+
+TEST(Options, CheckRejectsBadValues) {
+  CompressOptions o;
+  o.components = 0;
+  EXPECT_THROW(o.Check(), Error);
+  o = CompressOptions{};
+  o.target_error = 0.1;
+  o.retained_energy = 0.9;
+  EXPECT_THROW(o.Check(), Error);
+  EXPECT_THROW(ParseMethod("jpeg"), Error);
+}
+
+}  // namespace
+}  // namespace btf
