@@ -263,21 +263,35 @@ double Irawan2012Model::SpecularIntegrand(const Vec2& uv, const Vec3& wi_in, con
   return band * IntensityVariation(loc) * cache_[static_cast<std::size_t>(loc.yarn)].area_factor;
 }
 
-void Irawan2012Model::EvalRgb(const Vec2& uv, const Vec3& wi_in, const Vec3& wo_in, double out[3]) const {
-  out[0] = out[1] = out[2] = 0;
-  Vec3 wi, wo;
-  if (!Normalise(wi_in, &wi) || !Normalise(wo_in, &wo) || wi.z() <= 0 || wo.z() <= 0) return;
+void Irawan2012Model::EvalUnit(const Vec2& uv, const Vec3& wi, const Vec3& wo, double out[3]) const {
   const Local loc = Locate(uv);
   const WeaveYarn& y = pattern_.yarns[static_cast<std::size_t>(loc.yarn)];
   double spec = Band(loc, wi, wo);
   if (spec > 0) spec *= IntensityVariation(loc) * cache_[static_cast<std::size_t>(loc.yarn)].area_factor * nspec_;
-  for (int c = 0; c < 3; ++c) out[c] = y.kd[static_cast<std::size_t>(c)] / kPi + y.ks[static_cast<std::size_t>(c)] * spec;
+  for (std::size_t c = 0; c < 3; ++c) out[c] = y.kd[c] / kPi + y.ks[c] * spec;
+}
+
+void Irawan2012Model::EvalRgb(const Vec2& uv, const Vec3& wi_in, const Vec3& wo_in, double out[3]) const {
+  out[0] = out[1] = out[2] = 0;
+  Vec3 wi, wo;
+  if (!Normalise(wi_in, &wi) || !Normalise(wo_in, &wo) || wi.z() <= 0 || wo.z() <= 0) return;
+  EvalUnit(uv, wi, wo, out);
 }
 
 void Irawan2012Model::Eval(const Vec2& uv, const Vec3& wi, const Vec3& wo, float* out) const {
   double v[3];
   EvalRgb(uv, wi, wo, v);
   for (int c = 0; c < 3; ++c) out[c] = static_cast<float>(v[c]);
+}
+
+void Irawan2012Model::EvalBatch(const Vec3& wi_in, const Vec3& wo_in, const Vec2* uv, int n, float* out) const {
+  Vec3 wi, wo;
+  const bool above = Normalise(wi_in, &wi) && Normalise(wo_in, &wo) && wi.z() > 0 && wo.z() > 0;
+  for (int i = 0; i < n; ++i) {
+    double v[3] = {0, 0, 0};
+    if (above) EvalUnit(uv[i], wi, wo, v);
+    for (int c = 0; c < 3; ++c) out[static_cast<std::ptrdiff_t>(i) * 3 + c] = static_cast<float>(v[c]);
+  }
 }
 
 void Irawan2012Model::ComputeNormalization() {

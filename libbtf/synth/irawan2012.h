@@ -52,6 +52,7 @@ class Irawan2012Model : public SvbrdfModel {
 
   std::string name() const override { return "irawan2012/" + preset_; }
   void Eval(const Vec2& uv, const Vec3& wi, const Vec3& wo, float* out) const override;
+  void EvalBatch(const Vec3& wi, const Vec3& wo, const Vec2* uv, int n, float* out) const override;
   nlohmann::json Describe() const override;
   double tile_size_mm() const override { return options_.tile_mm; }
 
@@ -86,6 +87,8 @@ class Irawan2012Model : public SvbrdfModel {
   };
   Local Locate(const Vec2& uv) const;
   double Band(const Local& loc, Vec3 wi, Vec3 wo) const;
+  // EvalRgb for unit directions above the surface.
+  void EvalUnit(const Vec2& uv, const Vec3& wi, const Vec3& wo, double out[3]) const;
   double IntensityVariation(const Local& loc) const;
   double NoisyUmax(const Local& loc, const WeaveYarn& y) const;
   void ComputeNormalization();

@@ -4,6 +4,8 @@
 #include <atomic>
 #include <cmath>
 
+#include <Eigen/Geometry>
+
 #include "libbtf/core/error.h"
 
 namespace btf {
@@ -58,32 +60,6 @@ std::atomic<unsigned long long> g_instance_counter{1};
 // Unit-height Gaussian of Eqs. 9 and 13 (Ashikhmin et al. 2000).
 double UnitHeight(double x, double sigma) { return std::exp(-0.5 * x * x / (sigma * sigma)); }
 
-double WrapPi(double a) {
-  while (a > kPi) a -= 2 * kPi;
-  while (a <= -kPi) a += 2 * kPi;
-  return a;
-}
-
-// Tangent and its local normal for a thread tilted by `tilt` out of the fabric plane.
-void Frame(bool along_v, double tilt, Vec3* t, Vec3* n) {
-  const double c = std::cos(tilt), s = std::sin(tilt);
-  if (along_v) {
-    *t = Vec3(0, c, s);
-    *n = Vec3(0, -s, c);
-  } else {
-    *t = Vec3(c, 0, s);
-    *n = Vec3(-s, 0, c);
-  }
-}
-
-// Azimuth of w about t, from the tangent's local normal n (phi in Fig. 9). Along t: 0.
-double Azimuth(const Vec3& w, const Vec3& t, const Vec3& n) {
-  const Vec3 b = t.cross(n);
-  const double x = w.dot(n), y = w.dot(b);
-  if (x == 0 && y == 0) return 0;
-  return std::atan2(y, x);
-}
-
 // Longitudinal angle psi of Eqs. 11-12: between the fabric normal and w projected onto the plane
 // of the (untilted) thread direction and the normal (signed, positive towards the thread direction).
 double Psi(const Vec3& w, bool along_v) {
@@ -118,34 +94,63 @@ Sadeghi2013Model::Sadeghi2013Model(std::string preset, SadeghiParams params)
     for (double o : th.offsets)
       if (!(std::abs(o) <= kPi / 2 + 1e-12)) fail(id + ": tangent offsets must lie in [-90, 90] degrees");
     cover += th.coverage;
-    curves_.push_back({sadeghi2013::SampleTangentCurve(th.offsets, th.lengths, params_.tangent_step)});
+    Sampled c;
+    for (const auto& smp : sadeghi2013::SampleTangentCurve(th.offsets, th.lengths, params_.tangent_step))
+      c.frames.push_back(MakeFrame(th.along_v, smp.angle, smp.weight));
+    curves_.push_back(std::move(c));
   }
   if (cover > 1 + 1e-9) fail("the thread coverages a must sum to <= 1");
 }
 
-void Sadeghi2013Model::ThreadScattering(const SadeghiThread& th, const Vec3& t, const Vec3& wi, const Vec3& wo,
-                                        double* surface, double* volume) const {
-  // Longitudinal angles from the normal plane of t; azimuths about t (Fig. 9).
-  const double sin_i = std::clamp(wi.dot(t), -1.0, 1.0), sin_o = std::clamp(wo.dot(t), -1.0, 1.0);
-  const double theta_i = std::asin(sin_i), theta_o = std::asin(sin_o);
-  const double theta_h = 0.5 * (theta_i + theta_o), theta_d = 0.5 * (theta_i - theta_o);
-  const Vec3 n = th.along_v ? Vec3(0, -t.z(), t.y()) : Vec3(-t.z(), 0, t.x());
-  const double phi_d = WrapPi(Azimuth(wi, t, n) - Azimuth(wo, t, n));
-  const double cos_half_phi = std::cos(0.5 * phi_d);  // >= 0 for phi_d in (-pi, pi]
-  const double cos_td = std::cos(theta_d);
+Sadeghi2013Model::TangentFrame Sadeghi2013Model::MakeFrame(bool along_v, double tilt, double weight) {
+  // Tilting the tangent by `tilt` tilts its local normal by the same angle (paper, Fig. 12).
+  const double c = std::cos(tilt), s = std::sin(tilt);
+  TangentFrame f;
+  f.t = along_v ? Vec3(0, c, s) : Vec3(c, 0, s);
+  f.n = along_v ? Vec3(0, -s, c) : Vec3(-s, 0, c);
+  f.b = f.t.cross(f.n);
+  f.weight = weight;
+  return f;
+}
+
+void Sadeghi2013Model::Terms(const SadeghiThread& th, const TangentFrame& f, const Vec3& wi, const Vec3& wo,
+                             double* surface, double* volume, double* masking) const {
+  *surface = *volume = *masking = 0;
+  // Longitudinal angles from the normal plane of t (sin theta = w . t) and azimuths about t from the
+  // local normal n (Fig. 9), without inverse trigonometry where the cosines suffice.
+  const double si = std::clamp(wi.dot(f.t), -1.0, 1.0), so = std::clamp(wo.dot(f.t), -1.0, 1.0);
+  const double ci = std::sqrt(1 - si * si), co = std::sqrt(1 - so * so);
+  // cos/sin of the azimuths; a direction along t has no azimuth: phi = 0 by convention.
+  const double cpi = ci > 1e-12 ? wi.dot(f.n) / ci : 1.0, spi = ci > 1e-12 ? wi.dot(f.b) / ci : 0.0;
+  const double cpo = co > 1e-12 ? wo.dot(f.n) / co : 1.0, spo = co > 1e-12 ? wo.dot(f.b) / co : 0.0;
+  // Masking (Eqs. 7-9) with the unit-height Gaussian u of phi_d.
+  const double m_i = std::max(cpi, 0.0), m_o = std::max(cpo, 0.0);
+  if (m_i == 0 || m_o == 0) return;  // then M = 0: back-facing for light or viewer
+  const double cos_phi_d = std::clamp(cpi * cpo + spi * spo, -1.0, 1.0);
+  const double phi_d = std::acos(cos_phi_d);  // |phi_i - phi_o| wrapped to [0, pi]
+  const double um = UnitHeight(phi_d, params_.masking_sigma);
+  *masking = (1 - um) * m_i * m_o + um * std::min(m_i, m_o);
+  const double theta_h = 0.5 * std::atan2(si * co + ci * so, ci * co - si * so);  // (theta_i + theta_o) / 2
+  const double cos2_td_exact = 0.5 * (1 + ci * co + si * so);                    // cos^2((theta_i - theta_o) / 2)
+  const double cos_half_phi = std::sqrt(0.5 * (1 + cos_phi_d));                  // cos(phi_d / 2) >= 0
   // Both directions grazing along +t and -t make cos(theta_d) -> 0: the 1/cos^2 solid-angle factor
   // of Eq. 4 is capped there (theta_d <= 89.9 deg) so values stay finite.
-  const double cos2_td = std::max(cos_td * cos_td, 3.0461741978670857e-6);
+  const double cos2_td = std::max(cos2_td_exact, 3.0461741978670857e-6);
   // Eq. 2: Fresnel at the effective angle acos(cos theta_d cos(phi_d / 2)).
-  const double cos_eff = std::clamp(cos_td * cos_half_phi, 0.0, 1.0);
+  const double cos_eff = std::clamp(std::sqrt(cos2_td_exact) * cos_half_phi, 0.0, 1.0);
   const double fr = FresnelDielectric(cos_eff, params_.eta);
   const double f_surface = fr * cos_half_phi * UnitGaussian(th.gamma_s, theta_h);
   // Eq. 3: transmission in and out, our choice: both at the same effective angle (reciprocal).
   const double ft = 1 - fr;
-  const double cos_sum = std::max(std::cos(theta_i) + std::cos(theta_o), 1e-6);
+  const double cos_sum = std::max(ci + co, 1e-6);
   const double f_volume = ft * ft * ((1 - th.kd) * UnitGaussian(th.gamma_v, theta_h) + th.kd) / cos_sum;
   *surface = f_surface / cos2_td;
   *volume = f_volume / cos2_td;
+}
+
+void Sadeghi2013Model::ThreadTerms(const SadeghiThread& th, double tilt, const Vec3& wi, const Vec3& wo,
+                                   double* surface, double* volume, double* masking) const {
+  Terms(th, MakeFrame(th.along_v, tilt, 1.0), wi, wo, surface, volume, masking);
 }
 
 void Sadeghi2013Model::EvalRgb(const Vec3& wi_in, const Vec3& wo_in, double out[3]) const {
@@ -170,19 +175,11 @@ void Sadeghi2013Model::EvalRgb(const Vec3& wi_in, const Vec3& wo_in, double out[
     q += th.coverage * P;  // Eq. 15: (a_j / N_j) sum_t P(t)
     if (P == 0 || th.coverage == 0) continue;
     double s_sum = 0, v_sum = 0;
-    for (const auto& smp : curves_[j].samples) {
-      Vec3 t, n;
-      Frame(th.along_v, smp.angle, &t, &n);
-      // Masking (Eqs. 7-9) from the azimuths about the tilted tangent.
-      const double phi_i = Azimuth(wi, t, n), phi_o = Azimuth(wo, t, n);
-      const double m_i = std::max(std::cos(phi_i), 0.0), m_o = std::max(std::cos(phi_o), 0.0);
-      const double um = UnitHeight(WrapPi(phi_i - phi_o), sigma);
-      const double M = (1 - um) * m_i * m_o + um * std::min(m_i, m_o);
-      if (M == 0) continue;
-      double s, v;
-      ThreadScattering(th, t, wi, wo, &s, &v);
-      s_sum += smp.weight * s * M;
-      v_sum += smp.weight * v * M;
+    for (const TangentFrame& fr : curves_[j].frames) {
+      double s, v, M;
+      Terms(th, fr, wi, wo, &s, &v, &M);
+      s_sum += fr.weight * s * M;
+      v_sum += fr.weight * v * M;
     }
     for (int c = 0; c < 3; ++c) num[c] += th.coverage * P * (s_sum + v_sum * th.albedo[static_cast<std::size_t>(c)]);
   }
@@ -195,14 +192,26 @@ void Sadeghi2013Model::EvalRgb(const Vec3& wi_in, const Vec3& wo_in, double out[
 }
 
 void Sadeghi2013Model::EvalBrdf(const Vec3& wi, const Vec3& wo, float* out) const {
-  // BTF generation calls Eval for every texel of one direction pair: remember the last answer.
+  double v[3];
+  EvalRgb(wi, wo, v);
+  for (int c = 0; c < 3; ++c) out[c] = static_cast<float>(v[c]);
+}
+
+void Sadeghi2013Model::EvalBatch(const Vec3& wi, const Vec3& wo, const Vec2* /*uv*/, int n, float* out) const {
+  float v[3];
+  EvalBrdf(wi, wo, v);
+  for (int i = 0; i < n; ++i)
+    for (int c = 0; c < 3; ++c) out[static_cast<std::ptrdiff_t>(i) * 3 + c] = v[c];
+}
+
+void Sadeghi2013Model::Eval(const Vec2& /*uv: constant over the tile*/, const Vec3& wi, const Vec3& wo,
+                            float* out) const {
+  // Callers that loop over texels for one direction pair hit this per-thread cache.
   static thread_local unsigned long long last_id = 0;
   static thread_local Vec3 last_wi, last_wo;
   static thread_local float last[3];
   if (last_id != id_ || last_wi != wi || last_wo != wo) {
-    double v[3];
-    EvalRgb(wi, wo, v);
-    for (int c = 0; c < 3; ++c) last[c] = static_cast<float>(v[c]);
+    EvalBrdf(wi, wo, last);
     last_id = id_;
     last_wi = wi;
     last_wo = wo;
@@ -210,11 +219,6 @@ void Sadeghi2013Model::EvalBrdf(const Vec3& wi, const Vec3& wo, float* out) cons
   out[0] = last[0];
   out[1] = last[1];
   out[2] = last[2];
-}
-
-void Sadeghi2013Model::Eval(const Vec2& /*uv: constant over the tile*/, const Vec3& wi, const Vec3& wo,
-                            float* out) const {
-  EvalBrdf(wi, wo, out);
 }
 
 nlohmann::json Sadeghi2013Model::Describe() const {
@@ -232,7 +236,7 @@ nlohmann::json Sadeghi2013Model::Describe() const {
                        {"coverage", th.coverage},
                        {"tangent_offsets_deg", off},
                        {"tangent_lengths", th.lengths},
-                       {"tangent_samples", curves_[j].samples.size()}});
+                       {"tangent_samples", curves_[j].frames.size()}});
   }
   return {{"model", "sadeghi2013"},
           {"preset", preset_},

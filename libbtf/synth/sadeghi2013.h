@@ -54,25 +54,33 @@ class Sadeghi2013Model : public SvbrdfModel {
   std::string name() const override { return "sadeghi2013/" + preset_; }
   void Eval(const Vec2& uv, const Vec3& wi, const Vec3& wo, float* out) const override;
   void EvalBrdf(const Vec3& wi, const Vec3& wo, float* out) const override;
+  void EvalBatch(const Vec3& wi, const Vec3& wo, const Vec2* uv, int n, float* out) const override;
   nlohmann::json Describe() const override;
   double tile_size_mm() const override { return params_.tile_mm; }
 
   // Double-precision BRDF (1/sr, without cos theta_i); 0 below the horizon.
   void EvalRgb(const Vec3& wi, const Vec3& wo, double out[3]) const;
-  // Thread scattering function f_s of Eq. 4 for tangent t (unit), split into the colourless surface
-  // part and the volume part before the albedo A: f_s = surface + volume * A.
-  void ThreadScattering(const SadeghiThread& th, const Vec3& t, const Vec3& wi, const Vec3& wo, double* surface,
-                        double* volume) const;
+  // Thread scattering f_s of Eq. 4 and masking M of Eq. 9 for the tangent of `th` tilted by `tilt`
+  // (radians) out of the fabric plane; f_s = surface + volume * A.
+  void ThreadTerms(const SadeghiThread& th, double tilt, const Vec3& wi, const Vec3& wo, double* surface,
+                   double* volume, double* masking) const;
   const SadeghiParams& params() const { return params_; }
 
  private:
-  struct Sampled {
-    std::vector<sadeghi2013::TangentSample> samples;
+  struct TangentFrame {
+    Vec3 t, n, b;  // tangent, its local normal, t x n
+    double weight;
   };
+  struct Sampled {
+    std::vector<TangentFrame> frames;
+  };
+  static TangentFrame MakeFrame(bool along_v, double tilt, double weight);
+  void Terms(const SadeghiThread& th, const TangentFrame& f, const Vec3& wi, const Vec3& wo, double* surface,
+             double* volume, double* masking) const;
   std::string preset_;
   SadeghiParams params_;
   std::vector<Sampled> curves_;
-  unsigned long long id_;  // distinguishes instances in EvalBrdf's per-thread cache
+  unsigned long long id_;  // distinguishes instances in Eval's per-thread cache
 };
 
 // Presets: Table II fabrics linen_plain, crepe_de_chine, charmeuse_front, charmeuse_back,
