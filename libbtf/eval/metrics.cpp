@@ -1,0 +1,319 @@
+#include "libbtf/eval/metrics.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+#include "libbtf/core/error.h"
+#include "libbtf/eval/plot.h"
+
+namespace btf {
+
+void CompareOptions::Check() const {
+  BTF_CHECK_OPTION(std::isfinite(peak) && peak >= 0, "peak", "must be 0 (reference max) or a positive value");
+  BTF_CHECK_OPTION(std::isfinite(ssim_sigma) && ssim_sigma > 0 && ssim_sigma <= 64, "ssim_sigma", "must be in (0, 64]");
+  BTF_CHECK_OPTION(error_maps >= 0 && error_maps <= 1000, "error_maps", "must be 0..1000");
+  BTF_CHECK_OPTION(worst_images >= 0, "worst_images", "must be >= 0");
+}
+
+namespace {
+
+// Normalised Gaussian taps for offsets -r..r, r = ceil(3 sigma).
+std::vector<double> GaussianTaps(double sigma) {
+  const int r = std::max(1, int(std::ceil(3 * sigma)));
+  std::vector<double> w(2 * r + 1);
+  for (int i = -r; i <= r; ++i) w[i + r] = std::exp(-0.5 * i * i / (sigma * sigma));
+  return w;
+}
+
+// Separable Gaussian blur of a height x width plane; taps outside the image are dropped and the
+// remaining weights renormalised, so borders are local means rather than means with zeros.
+void Blur(const std::vector<double>& in, int h, int w, const std::vector<double>& taps, std::vector<double>& tmp,
+          std::vector<double>& out) {
+  const int r = int(taps.size() / 2);
+  tmp.assign(in.size(), 0.0);
+  out.assign(in.size(), 0.0);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      double s = 0, ws = 0;
+      for (int k = std::max(-r, -x); k <= std::min(r, w - 1 - x); ++k) s += taps[k + r] * in[y * w + x + k], ws += taps[k + r];
+      tmp[y * w + x] = s / ws;
+    }
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      double s = 0, ws = 0;
+      for (int k = std::max(-r, -y); k <= std::min(r, h - 1 - y); ++k) s += taps[k + r] * tmp[(y + k) * w + x], ws += taps[k + r];
+      out[y * w + x] = s / ws;
+    }
+}
+
+struct ImageStats {
+  double sum_sq_err = 0, sum_sq_ref = 0, max_abs = 0, ssim = 0;
+  int max_y = 0, max_x = 0, max_c = 0;
+};
+
+ImageStats MeasureImage(const float* ref, const float* test, int h, int w, int c, double peak, bool ssim,
+                        double sigma) {
+  ImageStats s;
+  const std::size_t n = std::size_t(h) * w * c;
+  for (std::size_t i = 0; i < n; ++i) {
+    const double d = double(test[i]) - double(ref[i]);
+    s.sum_sq_err += d * d;
+    s.sum_sq_ref += double(ref[i]) * double(ref[i]);
+    if (std::abs(d) > s.max_abs) {
+      s.max_abs = std::abs(d);
+      s.max_c = int(i % c);
+      s.max_x = int((i / c) % w);
+      s.max_y = int(i / (std::size_t(c) * w));
+    }
+  }
+  if (ssim) s.ssim = MeanSsim(ref, test, h, w, c, peak, sigma);
+  return s;
+}
+
+std::string Fmt(double v) { return fmt::format("{:.6g}", v); }
+
+}  // namespace
+
+double MeanSsim(const float* ref, const float* test, int h, int w, int c, double peak, double sigma) {
+  const auto taps = GaussianTaps(sigma);
+  const double c1 = (0.01 * peak) * (0.01 * peak), c2 = (0.03 * peak) * (0.03 * peak);
+  const std::size_t n = std::size_t(h) * w;
+  std::vector<double> a(n), b(n), prod(n), tmp, mu_a, mu_b, e_aa, e_bb, e_ab;
+  double total = 0;
+  for (int ch = 0; ch < c; ++ch) {
+    for (std::size_t i = 0; i < n; ++i) a[i] = ref[i * c + ch], b[i] = test[i * c + ch];
+    Blur(a, h, w, taps, tmp, mu_a);
+    Blur(b, h, w, taps, tmp, mu_b);
+    for (std::size_t i = 0; i < n; ++i) prod[i] = a[i] * a[i];
+    Blur(prod, h, w, taps, tmp, e_aa);
+    for (std::size_t i = 0; i < n; ++i) prod[i] = b[i] * b[i];
+    Blur(prod, h, w, taps, tmp, e_bb);
+    for (std::size_t i = 0; i < n; ++i) prod[i] = a[i] * b[i];
+    Blur(prod, h, w, taps, tmp, e_ab);
+    double sum = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const double ma = mu_a[i], mb = mu_b[i];
+      // Variances can come out slightly negative from rounding: clamp.
+      const double va = std::max(e_aa[i] - ma * ma, 0.0), vb = std::max(e_bb[i] - mb * mb, 0.0);
+      const double cov = e_ab[i] - ma * mb;
+      sum += ((2 * ma * mb + c1) * (2 * cov + c2)) / ((ma * ma + mb * mb + c1) * (va + vb + c2));
+    }
+    total += sum / double(n);
+  }
+  return total / c;
+}
+
+void FalseColour(double t, float* rgb) {
+  // Viridis-like stops (sRGB), interpolated in sRGB and returned linear.
+  static const Colour kStops[] = {Colour::Hex("#440154"), Colour::Hex("#3b528b"), Colour::Hex("#21918c"),
+                                  Colour::Hex("#5ec962"), Colour::Hex("#fde725")};
+  t = std::isfinite(t) ? std::clamp(t, 0.0, 1.0) : 1.0;
+  const double f = t * 4;
+  const int i = std::min(int(f), 3);
+  const double u = f - i;
+  const Colour a = kStops[i], b = kStops[i + 1];
+  rgb[0] = SrgbToLinear(float(a.r + (b.r - a.r) * u));
+  rgb[1] = SrgbToLinear(float(a.g + (b.g - a.g) * u));
+  rgb[2] = SrgbToLinear(float(a.b + (b.b - a.b) * u));
+}
+
+Image ErrorMapImage(const float* ref, const float* test, int h, int w, int c, double scale, int min_size) {
+  Image map(w, h, 3);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      double s = 0;
+      for (int k = 0; k < c; ++k) {
+        const std::size_t i = (std::size_t(y) * w + x) * c + k;
+        const double d = double(test[i]) - double(ref[i]);
+        s += d * d;
+      }
+      const double e = std::sqrt(s / c);
+      FalseColour(scale > 0 ? e / scale : 0.0, &map.at(x, y, 0));
+    }
+  const int zoom = std::max(1, (min_size + std::max(w, h) - 1) / std::max(w, h));
+  const int mw = w * zoom, mh = h * zoom;
+  const int width = std::max(mw, 220) + 16, height = mh + 50;
+  Canvas canvas(width, height, Colour{1, 1, 1});
+  canvas.Blit(map, 8, 8, zoom);
+  // Colour bar with its scale, so the map can be read without the JSON.
+  const int bar_w = width - 16;
+  for (int x = 0; x < bar_w; ++x) {
+    float rgb[3];
+    FalseColour(double(x) / (bar_w - 1), rgb);
+    Image px(1, 1, 3);
+    std::copy_n(rgb, 3, px.pixels.begin());
+    for (int y = 0; y < 10; ++y) canvas.Blit(px, 8 + x, mh + 14 + y);
+  }
+  const Colour black{0, 0, 0};
+  canvas.Text(8, mh + 30, "0", black);
+  const std::string hi = fmt::format("{:.3g} (RMS over channels)", scale);
+  canvas.Text(width - 8 - Canvas::TextWidth(hi), mh + 30, hi, black);
+  return canvas.image();
+}
+
+double CompareSummary::Metric(const std::string& metric) const {
+  if (metric == "rmse") return rmse;
+  if (metric == "rel") {
+    if (!rel_l2)
+      ThrowBadInput("the reference '{}' is all zero, so the relative error is undefined: use --metric rmse",
+                    reference);
+    return *rel_l2;
+  }
+  if (metric == "psnr") return psnr_db ? *psnr_db : std::numeric_limits<double>::infinity();
+  ThrowUsage("unknown metric '{}': use rmse, rel or psnr", metric);
+}
+
+nlohmann::json CompareSummary::ToJson() const {
+  nlohmann::json j;
+  j["reference"] = reference;
+  j["test"] = test;
+  j["shape"] = {{"views", views}, {"lights", lights}, {"height", height}, {"width", width}, {"channels", channels}};
+  j["values"] = values;
+  j["rmse"] = rmse;
+  j["rel_l2"] = rel_l2 ? nlohmann::json(*rel_l2) : nlohmann::json(nullptr);
+  j["psnr_db"] = psnr_db ? nlohmann::json(*psnr_db) : nlohmann::json(nullptr);
+  j["identical"] = rmse == 0;
+  j["peak"] = peak;
+  j["peak_source"] = peak_source;
+  j["max_abs"] = max_abs;
+  j["max_abs_at"] = {{"view", max_view}, {"light", max_light}, {"y", max_y}, {"x", max_x}, {"channel", max_channel}};
+  j["mean_ssim"] = mean_ssim ? nlohmann::json(*mean_ssim) : nlohmann::json(nullptr);
+  j["view_rmse"] = view_rmse;
+  j["light_rmse"] = light_rmse;
+  j["worst_images"] = nlohmann::json::array();
+  for (const auto& w : worst)
+    j["worst_images"].push_back({{"view", w.view}, {"light", w.light}, {"rmse", w.rmse}, {"max_abs", w.max_abs}});
+  j["error_maps"] = error_map_files;
+  j["seconds"] = times.ToJson();
+  return j;
+}
+
+CompareSummary Compare(const SlotSource& ref, const SlotSource& test, const CompareOptions& options,
+                       const Reporter& reporter) {
+  options.Check();
+  CheckCompatible(ref, test);
+  CompareSummary s;
+  s.reference = ref.name();
+  s.test = test.name();
+  s.views = ref.views().size();
+  s.lights = ref.lights().size();
+  s.height = ref.height();
+  s.width = ref.width();
+  s.channels = ref.channels();
+  const int V = s.views, L = s.lights, H = s.height, W = s.width, C = s.channels;
+  const std::size_t image = ref.image_size();
+  std::vector<float> rslot(ref.slot_size()), tslot(ref.slot_size());
+
+  // Pass 1 (only when the peak is the reference max): the SSIM constants depend on the peak.
+  Timer timer;
+  if (options.peak > 0) {
+    s.peak = options.peak;
+    s.peak_source = "option";
+  } else {
+    double mx = -std::numeric_limits<double>::infinity();
+    for (int v = 0; v < V; ++v) {
+      reporter.Progress(v, V, "reference peak");
+      ref.ReadViewSlot(v, rslot.data());
+      CheckFiniteSlot(ref, v, rslot.data());
+      for (float x : rslot) mx = std::max(mx, double(x));
+    }
+    reporter.Progress(V, V, "reference peak");
+    if (mx > 0) {
+      s.peak = mx;
+      s.peak_source = "reference max";
+    } else {
+      s.peak = 1;
+      s.peak_source = "1 (reference max <= 0)";
+      reporter.Warn("the reference '{}' has no positive value: PSNR and SSIM use peak 1", ref.name());
+    }
+    s.times.Add("peak", timer.Seconds());
+  }
+
+  // Pass 2: all metrics, one view slot of each input at a time.
+  timer.Restart();
+  std::vector<ImageStats> stats(std::size_t(V) * L);
+  for (int v = 0; v < V; ++v) {
+    reporter.Progress(v, V, "compare");
+    ref.ReadViewSlot(v, rslot.data());
+    test.ReadViewSlot(v, tslot.data());
+    CheckFiniteSlot(ref, v, rslot.data());
+    CheckFiniteSlot(test, v, tslot.data());
+#pragma omp parallel for schedule(dynamic)
+    for (int l = 0; l < L; ++l)
+      stats[std::size_t(v) * L + l] = MeasureImage(rslot.data() + l * image, tslot.data() + l * image, H, W, C,
+                                                   s.peak, options.ssim, options.ssim_sigma);
+  }
+  reporter.Progress(V, V, "compare");
+
+  // Merge in a fixed order (deterministic sums).
+  double sse = 0, ssr = 0, ssim = 0;
+  std::vector<double> view_sse(V, 0.0), light_sse(L, 0.0);
+  std::vector<ImageError> images;
+  for (int v = 0; v < V; ++v)
+    for (int l = 0; l < L; ++l) {
+      const ImageStats& st = stats[std::size_t(v) * L + l];
+      sse += st.sum_sq_err;
+      ssr += st.sum_sq_ref;
+      ssim += st.ssim;
+      view_sse[v] += st.sum_sq_err;
+      light_sse[l] += st.sum_sq_err;
+      if (st.max_abs > s.max_abs || (v == 0 && l == 0)) {
+        s.max_abs = st.max_abs;
+        s.max_view = v, s.max_light = l, s.max_y = st.max_y, s.max_x = st.max_x, s.max_channel = st.max_c;
+      }
+      images.push_back({v, l, std::sqrt(st.sum_sq_err / double(image)), st.max_abs});
+    }
+  s.values = std::uint64_t(V) * L * image;
+  const double mse = sse / double(s.values);
+  s.rmse = std::sqrt(mse);
+  if (ssr > 0)
+    s.rel_l2 = std::sqrt(sse / ssr);
+  else if (sse == 0)
+    s.rel_l2 = 0.0;  // both all zero: identical
+  if (mse > 0) s.psnr_db = 10 * std::log10(s.peak * s.peak / mse);
+  if (options.ssim) s.mean_ssim = ssim / (double(V) * L);
+  for (int v = 0; v < V; ++v) s.view_rmse.push_back(std::sqrt(view_sse[v] / (double(L) * image)));
+  for (int l = 0; l < L; ++l) s.light_rmse.push_back(std::sqrt(light_sse[l] / (double(V) * image)));
+  std::stable_sort(images.begin(), images.end(), [](const ImageError& a, const ImageError& b) { return a.rmse > b.rmse; });
+  s.worst.assign(images.begin(), images.begin() + std::min<std::size_t>(images.size(), options.worst_images));
+  s.times.Add("compare", timer.Seconds());
+
+  // Error maps of the worst images, on one common scale so their colours compare.
+  if (!options.error_maps_dir.empty() && options.error_maps > 0 && s.rmse > 0) {
+    timer.Restart();
+    if (!std::filesystem::is_directory(options.error_maps_dir))
+      ThrowIo("error-map folder '{}' does not exist: create it first", options.error_maps_dir.string());
+    const int n = std::min<int>(options.error_maps, int(images.size()));
+    std::vector<std::vector<float>> refs(n, std::vector<float>(image)), tests(n, std::vector<float>(image));
+    double scale = 0;
+    for (int i = 0; i < n; ++i) {
+      ref.ReadImage(images[i].view, images[i].light, refs[i].data());
+      test.ReadImage(images[i].view, images[i].light, tests[i].data());
+      for (std::size_t t = 0; t < image / C; ++t) {
+        double e = 0;
+        for (int k = 0; k < C; ++k) {
+          const double d = double(tests[i][t * C + k]) - refs[i][t * C + k];
+          e += d * d;
+        }
+        scale = std::max(scale, std::sqrt(e / C));
+      }
+    }
+    for (int i = 0; i < n; ++i) {
+      const auto path = options.error_maps_dir / fmt::format("error_{:02d}_view{}_light{}.png", i, images[i].view,
+                                                             images[i].light);
+      ImageWriteOptions wo;
+      wo.has_format = true;
+      wo.format = PixelFormat::kUint8;
+      wo.srgb = true;
+      WriteImage(path, ErrorMapImage(refs[i].data(), tests[i].data(), H, W, C, scale), wo);
+      s.error_map_files.push_back(path.string());
+    }
+    s.times.Add("error maps", timer.Seconds());
+  }
+  reporter.Info("rmse {} rel {} psnr {} dB (peak {}), max abs {}", Fmt(s.rmse), s.rel_l2 ? Fmt(*s.rel_l2) : "undefined",
+                s.psnr_db ? Fmt(*s.psnr_db) : "inf", Fmt(s.peak), Fmt(s.max_abs));
+  return s;
+}
+
+}  // namespace btf

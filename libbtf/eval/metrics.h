@@ -1,0 +1,83 @@
+#pragma once
+// Error metrics between a reference BTF and a test BTF (docs/btf-eval.md, "Metrics").
+//
+// All sums are accumulated in double, one view slot at a time, so inputs larger than memory work.
+// NaN or Inf in either input is refused (btf::Error, bad input) before any figure is reported.
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "libbtf/core/progress.h"
+#include "libbtf/core/timer.h"
+#include "libbtf/eval/source.h"
+#include "libbtf/io/image_io.h"
+
+namespace btf {
+
+struct CompareOptions {
+  // Peak value for PSNR and for the SSIM constants. 0 (default) = the reference's maximum value
+  // (found in a first pass over the reference); a reference whose maximum is <= 0 then uses 1.
+  double peak = 0;
+  // SSIM: standard deviation of the Gaussian window in texels (default 1.5, Wang et al. 2004); the
+  // window is truncated at 3 sigma and renormalised at image borders. K1 = 0.01, K2 = 0.03.
+  double ssim_sigma = 1.5;
+  bool ssim = true;  // false skips SSIM (the most expensive metric)
+  // Error maps: false-colour PNGs of the `error_maps` worst images (by RMSE) written to
+  // `error_maps_dir` (must exist); empty dir = none.
+  std::filesystem::path error_maps_dir;
+  int error_maps = 4;
+  int worst_images = 8;  // how many worst images the summary lists
+  void Check() const;
+};
+
+struct ImageError {
+  int view = 0, light = 0;
+  double rmse = 0, max_abs = 0;
+};
+
+struct CompareSummary {
+  std::string reference, test;
+  int views = 0, lights = 0, height = 0, width = 0, channels = 0;
+  std::uint64_t values = 0;
+  double rmse = 0;
+  // ||test - ref||_2 / ||ref||_2; empty when the reference is all zero.
+  std::optional<double> rel_l2;
+  double peak = 0;
+  std::string peak_source;  // "reference max", "option", or "1 (reference max <= 0)"
+  // 10 log10(peak^2 / MSE); empty when MSE = 0 (identical inputs).
+  std::optional<double> psnr_db;
+  double max_abs = 0;
+  int max_view = 0, max_light = 0, max_y = 0, max_x = 0, max_channel = 0;
+  std::optional<double> mean_ssim;  // empty when SSIM was skipped
+  std::vector<double> view_rmse, light_rmse;
+  std::vector<ImageError> worst;             // worst images first
+  std::vector<std::string> error_map_files;  // written PNGs
+  PhaseTimes times;
+
+  // Value of a named metric for thresholds: "rmse", "rel" or "psnr". Throws btf::Error (bad input)
+  // when it is undefined for these inputs (rel of an all-zero reference).
+  double Metric(const std::string& metric) const;
+  nlohmann::json ToJson() const;
+};
+
+// Compares two BTFs with equal shapes and samplings (else btf::Error, bad input).
+CompareSummary Compare(const SlotSource& reference, const SlotSource& test, const CompareOptions& options = {},
+                       const Reporter& reporter = {});
+
+// Mean SSIM of one image pair (height x width x channels), averaged over texels and channels.
+double MeanSsim(const float* reference, const float* test, int height, int width, int channels, double peak,
+                double sigma = 1.5);
+
+// False-colour error map of one image pair: per-texel RMS over channels, 0 -> dark blue, `scale`
+// -> yellow, upscaled by an integer factor to at least `min_size` pixels, with a labelled colour
+// bar. Pixel values are display (sRGB-encoded) values for WriteImage with srgb = true.
+Image ErrorMapImage(const float* reference, const float* test, int height, int width, int channels, double scale,
+                    int min_size = 256);
+
+// A perceptually ordered false-colour ramp (t in [0, 1]) as linear RGB.
+void FalseColour(double t, float* rgb);
+
+}  // namespace btf

@@ -1,0 +1,77 @@
+#pragma once
+// A small CPU renderer for looking at BTFs: a flat patch and a draped cylinder, textured with any
+// BTF source, lit by a point light or by an environment (Sattler et al. 2003, section 5: the
+// environment is integrated over a fixed set of sampled directions, without visibility).
+#include <memory>
+#include <string>
+
+#include "libbtf/core/dataset.h"
+#include "libbtf/core/directions.h"
+#include "libbtf/io/image_io.h"
+
+namespace btf {
+
+class SvbrdfModel;
+
+// A BTF evaluated at any texture position and pair of directions: (uv, wi, wo) -> channels,
+// directions in the local frame (z = normal, x = weft/u, y = warp/v), uv with period 1.
+class BtfEvaluator {
+ public:
+  virtual ~BtfEvaluator() = default;
+  virtual int channels() const = 0;
+  // True when values already include cos(theta_i) (the renderer then does not multiply by it).
+  virtual bool cos_theta_i_included() const { return false; }
+  virtual void Eval(const Vec2& uv, const Vec3& wi, const Vec3& wo, float* out) const = 0;
+};
+
+// A dataset (which must outlive the evaluator): the nearest texel (uv wrapped to the tile, row 0 =
+// v near 1 as in docs/conventions.md) and barycentric interpolation over the three nearest views x
+// the three nearest lights (Sampling::Barycentric), 9 samples.
+std::unique_ptr<BtfEvaluator> DatasetEvaluator(const Dataset& dataset);
+// An analytic model (which must outlive the evaluator), for ground truth without sampling.
+std::unique_ptr<BtfEvaluator> ModelEvaluator(const SvbrdfModel& model);
+
+struct RenderOptions {
+  std::string scene = "patch";      // "patch" (a 2 x 2 flat square) or "cylinder" (radius 0.6, length 2)
+  std::string lighting = "point";   // "point" or "environment"
+  // "sky" (gradient + sun lobe), "studio" (key + fill lobes) or "uniform" (radiance 1 everywhere:
+  // the white-furnace test, where a Lambertian BTF of albedo rho renders as rho).
+  std::string environment = "sky";
+  int width = 200, height = 160;    // pixels
+  double tiles = 3;                 // texture repeats along each side of the patch / along the cylinder
+  // Point light position (world: z up, camera at (0, -3.2, 2.6) looking at the origin) and its
+  // radiant intensity; the default gives irradiance about 1 at normal incidence at the centre.
+  Vec3 light_position{1.2, -1.4, 2.6};
+  double light_intensity = 10.2;
+  int environment_samples = 128;    // fixed Fibonacci-sphere directions, 4 pi / N sr each
+  double background = 0.02;         // radiance of pixels that miss the object
+  void Check() const;
+};
+
+// What pixel (px, py) sees: the surface point, its frame and texture coordinates (for tests).
+struct SurfacePoint {
+  bool hit = false;
+  Vec3 position, normal, tangent_u, tangent_v;  // world; tangent_u x tangent_v = normal
+  Vec2 uv;
+  Vec3 camera;  // the camera position (world)
+};
+SurfacePoint TracePixel(const RenderOptions& options, int px, int py);
+
+// Linear radiance image (3 channels; BTFs with 1 channel are shown grey, extra channels dropped).
+Image Render(const BtfEvaluator& btf, const RenderOptions& options);
+
+// Environment radiance (linear RGB) in world direction d (z up); exposed for tests and docs.
+void EnvironmentRadiance(const std::string& environment, const Vec3& d, double* rgb);
+
+// Side-by-side panel: ground truth | test | difference, tone-mapped with one exposure (ground
+// truth's 99th-percentile luminance -> 0.8) and labelled. The difference is |test - truth|
+// (luminance) relative to that same level, false colour from 0 to `diff_full_scale` (default 10 %).
+// Returns a linear image to write with srgb = true; `stats` (if non-null) gets the largest and the
+// mean relative difference over all pixels.
+struct PanelStats {
+  double max_rel_diff = 0, mean_rel_diff = 0;
+};
+Image ComparisonPanel(const Image& truth, const Image& test, const std::string& truth_label,
+                      const std::string& test_label, double diff_full_scale = 0.1, PanelStats* stats = nullptr);
+
+}  // namespace btf

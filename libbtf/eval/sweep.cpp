@@ -1,0 +1,400 @@
+#include "libbtf/eval/sweep.h"
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <set>
+#include <sstream>
+
+#include "libbtf/compress/codec.h"
+#include "libbtf/core/atomic_file.h"
+#include "libbtf/core/error.h"
+#include "libbtf/eval/codec_source.h"
+#include "libbtf/eval/metrics.h"
+#include "libbtf/eval/plot.h"
+#include "libbtf/io/dataset_io.h"
+#include "libbtf/io/image_io.h"
+
+namespace btf {
+
+void SweepOptions::Check() const {
+  BTF_CHECK_OPTION(!methods.empty(), "methods", "name at least one method");
+  for (const auto& m : methods) ParseMethod(m);  // throws (usage) for unknown names
+  BTF_CHECK_OPTION(!components.empty(), "components", "give at least one component count");
+  for (int c : components) BTF_CHECK_OPTION(c >= 1, "components", "every count must be >= 1");
+  for (int k : clusters) BTF_CHECK_OPTION(k >= 1, "clusters", "every count must be >= 1");
+  BTF_CHECK_OPTION(std::find(methods.begin(), methods.end(), "lpca") == methods.end() || !clusters.empty(), "clusters",
+                   "lpca needs at least one cluster count");
+  BTF_CHECK_OPTION(runs >= 1 && runs <= 100, "runs", "must be 1..100");
+  BTF_CHECK_OPTION(error_metric == "rel" || error_metric == "rmse", "error_metric", "must be rel or rmse");
+  render_options.Check();
+}
+
+double Median(std::vector<double> v) {
+  if (v.empty()) ThrowUsage("median of an empty list");
+  std::sort(v.begin(), v.end());
+  const std::size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+std::string Base64(const std::string& bytes) {
+  static constexpr char kAlphabet[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string out;
+  out.reserve((bytes.size() + 2) / 3 * 4);
+  for (std::size_t i = 0; i < bytes.size(); i += 3) {
+    const std::uint32_t b0 = static_cast<unsigned char>(bytes[i]);
+    const std::uint32_t b1 = i + 1 < bytes.size() ? static_cast<unsigned char>(bytes[i + 1]) : 0;
+    const std::uint32_t b2 = i + 2 < bytes.size() ? static_cast<unsigned char>(bytes[i + 2]) : 0;
+    const std::uint32_t n = (b0 << 16) | (b1 << 8) | b2;
+    out += kAlphabet[(n >> 18) & 63];
+    out += kAlphabet[(n >> 12) & 63];
+    out += i + 1 < bytes.size() ? kAlphabet[(n >> 6) & 63] : '=';
+    out += i + 2 < bytes.size() ? kAlphabet[n & 63] : '=';
+  }
+  return out;
+}
+
+namespace {
+
+nlohmann::json Opt(const std::optional<double>& v) { return v ? nlohmann::json(*v) : nlohmann::json(nullptr); }
+
+std::string ReadBytes(const std::filesystem::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  if (!in) ThrowIo("cannot read '{}'", p.string());
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+std::string Html(const std::string& s) {
+  std::string out;
+  for (char ch : s) {
+    if (ch == '<') out += "&lt;";
+    else if (ch == '>') out += "&gt;";
+    else if (ch == '&') out += "&amp;";
+    else if (ch == '"') out += "&quot;";
+    else out += ch;
+  }
+  return out;
+}
+
+std::string PointName(const SweepPoint& p) {
+  return p.method == "lpca" ? fmt::format("lpca_k{}_c{}", p.clusters, p.components)
+                            : fmt::format("{}_c{}", p.method, p.components);
+}
+
+void WritePng(const std::filesystem::path& path, const Image& image) {
+  ImageWriteOptions wo;
+  wo.has_format = true;
+  wo.format = PixelFormat::kUint8;
+  wo.srgb = true;
+  WriteImage(path, image, wo);
+}
+
+// One plot of error against a cost, one series per (method, k), Pareto front marked.
+Plot CostPlot(const std::vector<SweepPoint>& points, const std::string& title, const std::string& x_label,
+              const std::string& y_label, double SweepPoint::*cost_d, std::uint64_t SweepPoint::*cost_u,
+              const std::vector<int>& front) {
+  Plot plot;
+  plot.title = title;
+  plot.x_label = x_label;
+  plot.y_label = y_label;
+  plot.log_x = plot.log_y = true;
+  std::map<std::string, int> series_of;
+  auto cost = [&](const SweepPoint& p) { return cost_d ? p.*cost_d : double(p.*cost_u); };
+  for (const auto& p : points) {
+    const std::string key = p.method == "lpca" ? fmt::format("lpca k={}", p.clusters) : p.method;
+    if (!series_of.count(key)) {
+      series_of[key] = int(plot.series.size());
+      PlotSeries s;
+      s.name = key;
+      s.colour = SeriesColour(int(plot.series.size()));
+      s.shape = int(plot.series.size());
+      s.line = true;
+      plot.series.push_back(s);
+    }
+    auto& s = plot.series[series_of[key]];
+    s.x.push_back(cost(p));
+    s.y.push_back(p.error);
+    s.labels.push_back(fmt::format("c{}", p.components));
+  }
+  PlotSeries pf;
+  pf.name = "Pareto front";
+  pf.colour = Colour{0, 0, 0};
+  pf.line = true;
+  pf.ring_markers = true;
+  for (int i : front) pf.x.push_back(cost(points[i])), pf.y.push_back(points[i].error);
+  plot.series.push_back(pf);
+  return plot;
+}
+
+std::string ReportHtml(const SweepSummary& s, const SweepOptions& o, const std::filesystem::path& dir,
+                       const std::vector<std::string>& plot_names) {
+  std::string h;
+  h += "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n";
+  h += "<title>libbtf codec sweep: " + Html(s.dataset) + "</title>\n";
+  h += "<style>body{font-family:sans-serif;margin:24px;max-width:1500px;color:#222}"
+       "table{border-collapse:collapse;font-size:13px}td,th{border:1px solid #bbb;padding:3px 7px;text-align:right}"
+       "th{background:#eee}td.l{text-align:left}tr.front td{background:#fff6d5}"
+       ".plots img{border:1px solid #ccc;margin:4px;max-width:100%}.renders img{margin:6px 0;max-width:100%}"
+       "code{background:#f3f3f3;padding:1px 4px}</style></head><body>\n";
+  h += "<h1>Codec sweep: error against size and run time</h1>\n";
+  h += fmt::format(
+      "<p>Dataset <code>{}</code>: {} views &times; {} lights &times; {}&times;{} texels &times; {} channels, "
+      "{:.3f} MB as float32. {} settings, each timed over {} run(s) (median). Error metric on the plots: "
+      "<b>{}</b>. PSNR peak: {:.6g} (the reference's maximum value).</p>\n",
+      Html(s.dataset), s.views, s.lights, s.width, s.height, s.channels, s.raw_float32_bytes / 1e6, s.points.size(),
+      o.runs, s.error_metric == "rel" ? "relative L2 error ||decoded - truth|| / ||truth||" : "RMSE",
+      s.psnr_peak);
+  if (!o.command_line.empty()) h += "<p>Made by <code>" + Html(o.command_line) + "</code></p>\n";
+  h += "<h2>Plots</h2>\n<p>Lines join the settings of one method (and cluster count); black rings and the black line "
+       "mark the Pareto front (no other setting is both cheaper and more accurate). Both axes are logarithmic.</p>\n"
+       "<div class=\"plots\">\n";
+  for (const auto& name : plot_names)
+    h += "<img alt=\"" + name + "\" src=\"data:image/svg+xml;base64," + Base64(ReadBytes(dir / (name + ".svg"))) +
+         "\">\n";
+  h += "</div>\n<h2>Results</h2>\n<p>bytes = stored coefficient arrays (Codec::StoredBytes); ratio = float32 raw size "
+       "/ bytes; times in seconds (median); &#9733; = on the Pareto front of error against bytes (B), compression "
+       "time (C) or decoding time (D).</p>\n";
+  h += "<table><tr><th>method</th><th>k</th><th>c</th><th>stored k/c</th><th>bytes</th><th>ratio</th>"
+       "<th>compress s</th><th>decode s</th><th>RMSE</th><th>rel L2</th><th>PSNR dB</th><th>SSIM</th>"
+       "<th>max abs</th><th>Pareto</th></tr>\n";
+  for (const auto& p : s.points) {
+    const bool any = p.pareto_bytes || p.pareto_compress || p.pareto_decode;
+    const std::string marks = std::string(p.pareto_bytes ? "B" : "") + (p.pareto_compress ? "C" : "") +
+                              (p.pareto_decode ? "D" : "");
+    h += fmt::format(
+        "<tr{}><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}/{}</td><td>{}</td><td>{:.1f}</td><td>{:.4g}</td>"
+        "<td>{:.4g}</td><td>{:.4g}</td><td>{}</td><td>{}</td><td>{}</td><td>{:.4g}</td><td>{}</td></tr>\n",
+        any ? " class=\"front\"" : "", p.method, p.clusters ? std::to_string(p.clusters) : "-", p.components,
+        p.stored_clusters ? std::to_string(p.stored_clusters) : "-", p.stored_components, p.bytes, p.ratio_float32,
+        p.compress_s, p.decode_s, p.rmse, p.rel_l2 ? fmt::format("{:.4g}", *p.rel_l2) : "-",
+        p.psnr_db ? fmt::format("{:.2f}", *p.psnr_db) : "inf", p.mean_ssim ? fmt::format("{:.4f}", *p.mean_ssim) : "-",
+        p.max_abs, any ? "&#9733; " + marks : "");
+  }
+  h += "</table>\n";
+  if (!s.renders.empty()) {
+    h += "<h2>Rendered comparison</h2>\n<p>Ground truth = the dataset, interpolated between its sampled directions "
+         "(barycentric over the three nearest views &times; lights, nearest texel); decoded = the codec's own "
+         "arbitrary-direction decoder. For each method the setting with the lowest error is shown. Both images share "
+         "one exposure; the difference is |decoded &minus; truth| in luminance relative to the truth's "
+         "99th-percentile luminance, in false colour (dark blue 0, yellow = full scale). Environment lighting sums "
+         + std::to_string(o.render_options.environment_samples) +
+         " fixed directions without visibility (Sattler et al. 2003, section 5).</p>\n<div class=\"renders\">\n";
+    for (const auto& r : s.renders)
+      h += fmt::format("<h3>{}: {}, {} light</h3>\n<p>max difference {:.3g} %, mean {:.3g} %</p>\n", Html(r.label),
+                       r.scene, r.lighting, 100 * r.max_rel_diff, 100 * r.mean_rel_diff) +
+           "<img alt=\"" + Html(r.label) + "\" src=\"data:image/png;base64," + Base64(ReadBytes(r.file)) + "\">\n";
+    h += "</div>\n";
+  }
+  h += "<h2>Metrics</h2>\n<ul>"
+       "<li>RMSE = sqrt(mean over all values of (decoded &minus; truth)&sup2;)</li>"
+       "<li>relative L2 = ||decoded &minus; truth||<sub>2</sub> / ||truth||<sub>2</sub> over all values</li>"
+       "<li>PSNR = 10 log<sub>10</sub>(peak&sup2; / MSE), peak = the truth's maximum value</li>"
+       "<li>SSIM: mean over images, texels and channels of Wang et al. (2004) SSIM with a Gaussian window "
+       "(&sigma; = 1.5 texels, truncated at 3&sigma;), C1 = (0.01 peak)&sup2;, C2 = (0.03 peak)&sup2;</li>"
+       "<li>Times: wall clock on this machine, median of the runs; compression from an in-memory dataset, decoding "
+       "of the whole BTF to memory (Codec::DecodeAll).</li></ul>\n";
+  h += "<p>Data: <code>results.json</code> next to this file. Definitions: docs/btf-eval.md.</p>\n</body></html>\n";
+  return h;
+}
+
+}  // namespace
+
+nlohmann::json SweepPoint::ToJson() const {
+  nlohmann::json j;
+  j["method"] = method;
+  j["params"] = {{"components", components}, {"clusters", method == "lpca" ? nlohmann::json(clusters) : nlohmann::json(nullptr)}};
+  j["stored"] = {{"components", stored_components}, {"clusters", method == "lpca" ? nlohmann::json(stored_clusters) : nlohmann::json(nullptr)}};
+  j["bytes"] = bytes;
+  j["file_bytes"] = file_bytes;
+  j["ratio"] = ratio_float32;
+  j["ratio_half"] = ratio_half;
+  j["compress_s"] = compress_s;
+  j["decode_s"] = decode_s;
+  j["compress_runs_s"] = compress_runs;
+  j["decode_runs_s"] = decode_runs;
+  j["errors"] = {{"rmse", rmse}, {"rel_l2", Opt(rel_l2)}, {"psnr_db", Opt(psnr_db)}, {"mean_ssim", Opt(mean_ssim)},
+                 {"max_abs", max_abs}};
+  j["error"] = error;
+  j["pareto"] = {{"bytes", pareto_bytes}, {"compress_time", pareto_compress}, {"decode_time", pareto_decode}};
+  j["warnings"] = warnings;
+  j["codec_file"] = codec_file;
+  return j;
+}
+
+nlohmann::json SweepSummary::ToJson() const {
+  nlohmann::json j;
+  j["dataset"] = dataset;
+  j["output_dir"] = output_dir;
+  j["shape"] = {{"views", views}, {"lights", lights}, {"height", height}, {"width", width}, {"channels", channels}};
+  j["raw_float32_bytes"] = raw_float32_bytes;
+  j["error_metric"] = error_metric;
+  j["psnr_peak"] = psnr_peak;
+  j["psnr_peak_definition"] = "max reference value";
+  j["points"] = nlohmann::json::array();
+  for (const auto& p : points) j["points"].push_back(p.ToJson());
+  j["renders"] = nlohmann::json::array();
+  for (const auto& r : renders)
+    j["renders"].push_back({{"method", r.method}, {"label", r.label}, {"scene", r.scene}, {"lighting", r.lighting},
+                            {"file", r.file}, {"max_rel_diff", r.max_rel_diff}, {"mean_rel_diff", r.mean_rel_diff}});
+  j["files"] = files;
+  j["report"] = report;
+  j["seconds"] = times.ToJson();
+  return j;
+}
+
+SweepSummary RunSweep(const std::filesystem::path& dataset_path, const std::filesystem::path& dir,
+                      const SweepOptions& o, const Reporter& reporter) {
+  o.Check();
+  Timer timer;
+  const Dataset data = ReadDataset(dataset_path);
+  // Refuse NaN/Inf up front with the item named (Compress would too, but only for the first method).
+  const auto truth = MemorySource(data, dataset_path.string());
+  for (int v = 0; v < data.num_views(); ++v) CheckFiniteSlot(*truth, v, data.view_slot(v).data());
+  std::filesystem::create_directories(dir);
+  if (o.keep_codecs) std::filesystem::create_directories(dir / "codecs");
+  SweepSummary s;
+  s.dataset = dataset_path.string();
+  s.output_dir = dir.string();
+  s.error_metric = o.error_metric;
+  s.views = data.num_views(), s.lights = data.num_lights(), s.height = data.height(), s.width = data.width();
+  s.channels = data.channels();
+  s.raw_float32_bytes = std::uint64_t(data.size()) * 4;
+  s.times.Add("read", timer.Seconds());
+
+  // The settings, in a fixed order.
+  std::vector<SweepPoint> todo;
+  for (const auto& m : o.methods) {
+    const std::vector<int> ks = m == "lpca" ? o.clusters : std::vector<int>{0};
+    for (int k : ks)
+      for (int c : o.components) {
+        SweepPoint p;
+        p.method = m, p.components = c, p.clusters = k;
+        todo.push_back(p);
+      }
+  }
+  std::map<std::string, std::pair<double, Codec>> best;  // lowest-error codec per method, for renders
+  CompareOptions co;
+  co.ssim = o.ssim;
+  for (std::size_t i = 0; i < todo.size(); ++i) {
+    SweepPoint p = todo[i];
+    reporter.Progress(i, todo.size(), "sweep");
+    CompressOptions opt;
+    opt.method = ParseMethod(p.method);
+    opt.components = p.components;
+    if (p.clusters) opt.clusters = p.clusters;
+    opt.seed = o.seed;
+    opt.log_transform = o.log_transform;
+    Codec codec;
+    CompressSummary cs;
+    for (int r = 0; r < o.runs; ++r) {
+      Timer t;
+      codec = Compress(data, opt, Reporter(), &cs);
+      p.compress_runs.push_back(t.Seconds());
+    }
+    p.warnings = cs.warnings;
+    for (const auto& w : p.warnings) reporter.Warn("{}: {}", PointName(p), w);
+    p.stored_components = cs.components;
+    p.stored_clusters = cs.clusters;
+    p.bytes = codec.StoredBytes();
+    p.ratio_float32 = p.bytes ? double(codec.RawBytes(4)) / double(p.bytes) : 0;
+    p.ratio_half = p.bytes ? double(codec.RawBytes(2)) / double(p.bytes) : 0;
+    Dataset decoded;
+    for (int r = 0; r < o.runs; ++r) {
+      Timer t;
+      decoded = codec.DecodeAll();
+      p.decode_runs.push_back(t.Seconds());
+    }
+    p.compress_s = Median(p.compress_runs);
+    p.decode_s = Median(p.decode_runs);
+    const CompareSummary e = Compare(*truth, *MemorySource(decoded, PointName(p)), co);
+    s.psnr_peak = e.peak;
+    p.rmse = e.rmse, p.max_abs = e.max_abs, p.rel_l2 = e.rel_l2, p.psnr_db = e.psnr_db, p.mean_ssim = e.mean_ssim;
+    p.error = o.error_metric == "rel" && e.rel_l2 ? *e.rel_l2 : e.rmse;
+    if (o.keep_codecs) {
+      const auto file = dir / "codecs" / (PointName(p) + ".h5");
+      WriteCodec(file, codec, "btf-eval sweep");
+      p.codec_file = file.string();
+      p.file_bytes = std::filesystem::file_size(file);
+    }
+    reporter.Info("{}: {} bytes (ratio {:.1f}), compress {:.4g} s, decode {:.4g} s, {} {:.5g}", PointName(p), p.bytes,
+                  p.ratio_float32, p.compress_s, p.decode_s, o.error_metric, p.error);
+    auto it = best.find(p.method);
+    if (it == best.end() || p.error < it->second.first) best.insert_or_assign(p.method, std::make_pair(p.error, std::move(codec)));
+    s.points.push_back(std::move(p));
+  }
+  reporter.Progress(todo.size(), todo.size(), "sweep");
+  s.times.Add("sweep", timer.Seconds());
+
+  // Pareto fronts and plots.
+  timer.Restart();
+  std::vector<double> err, bytes, ct, dt;
+  for (const auto& p : s.points)
+    err.push_back(p.error), bytes.push_back(double(p.bytes)), ct.push_back(p.compress_s), dt.push_back(p.decode_s);
+  const auto fb = ParetoFront(bytes, err), fc = ParetoFront(ct, err), fd = ParetoFront(dt, err);
+  for (int i : fb) s.points[i].pareto_bytes = true;
+  for (int i : fc) s.points[i].pareto_compress = true;
+  for (int i : fd) s.points[i].pareto_decode = true;
+  const std::string ylab = o.error_metric == "rel" ? "relative L2 error" : "RMSE";
+  const std::vector<std::pair<std::string, Plot>> plots = {
+      {"error_vs_bytes", CostPlot(s.points, ylab + " vs stored bytes", "stored bytes", ylab, nullptr, &SweepPoint::bytes, fb)},
+      {"error_vs_compress_time",
+       CostPlot(s.points, ylab + " vs compression time", "compression time (s, median)", ylab, &SweepPoint::compress_s, nullptr, fc)},
+      {"error_vs_decode_time",
+       CostPlot(s.points, ylab + " vs decoding time", "decoding time (s, median)", ylab, &SweepPoint::decode_s, nullptr, fd)}};
+  std::vector<std::string> plot_names;
+  for (const auto& [name, plot] : plots) {
+    WriteTextFileAtomic(dir / (name + ".svg"), PlotSvg(plot));
+    WritePng(dir / (name + ".png"), PlotImage(plot));
+    s.files.push_back((dir / (name + ".svg")).string());
+    s.files.push_back((dir / (name + ".png")).string());
+    plot_names.push_back(name);
+  }
+  s.times.Add("plots", timer.Seconds());
+
+  // Rendered comparisons: ground truth (the dataset) against the best codec of each method.
+  if (o.render) {
+    timer.Restart();
+    const auto gt = DatasetEvaluator(data);
+    const std::pair<const char*, const char*> panels[] = {{"patch", "point"}, {"cylinder", "environment"}};
+    for (const auto& [scene, lighting] : panels) {
+      RenderOptions ro = o.render_options;
+      ro.scene = scene;
+      ro.lighting = lighting;
+      const Image truth_img = Render(*gt, ro);
+      for (const auto& m : o.methods) {
+        const auto it = best.find(m);
+        if (it == best.end()) continue;
+        const SweepPoint* bp = nullptr;
+        for (const auto& p : s.points)
+          if (p.method == m && p.error == it->second.first) bp = &p;
+        const std::string label = bp ? PointName(*bp) : m;
+        const Image test_img = Render(*CodecEvaluator(it->second.second), ro);
+        SweepRender r;
+        r.method = m, r.label = label, r.scene = scene, r.lighting = lighting;
+        PanelStats ps;
+        const Image panel = ComparisonPanel(truth_img, test_img, "ground truth", "decoded " + label, 0.1, &ps);
+        r.max_rel_diff = ps.max_rel_diff;
+        r.mean_rel_diff = ps.mean_rel_diff;
+        r.file = (dir / fmt::format("render_{}_{}_{}.png", m, scene, lighting)).string();
+        WritePng(r.file, panel);
+        s.files.push_back(r.file);
+        s.renders.push_back(r);
+      }
+    }
+    s.times.Add("render", timer.Seconds());
+  }
+
+  timer.Restart();
+  s.report = (dir / "report.html").string();
+  WriteTextFileAtomic(dir / "results.json", s.ToJson().dump(2));
+  s.files.push_back((dir / "results.json").string());
+  WriteTextFileAtomic(s.report, ReportHtml(s, o, dir, plot_names));
+  s.files.push_back(s.report);
+  s.times.Add("report", timer.Seconds());
+  return s;
+}
+
+}  // namespace btf

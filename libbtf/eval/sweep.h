@@ -1,0 +1,84 @@
+#pragma once
+// Codec sweeps: compress a dataset with each setting, time compression and decoding, measure the
+// error and the size, then write results.json, plots (PNG + SVG) and a self-contained HTML report
+// (docs/btf-eval.md, "sweep").
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "libbtf/core/progress.h"
+#include "libbtf/core/timer.h"
+#include "libbtf/eval/render.h"
+
+namespace btf {
+
+struct SweepOptions {
+  std::vector<std::string> methods{"pca-view", "lpca"};  // codec methods (libbtf/compress)
+  std::vector<int> components{1, 2, 4, 8, 16};            // c per view slot / per cluster
+  std::vector<int> clusters{8, 16, 32};                   // k, lpca only
+  int runs = 3;                 // timed runs per setting; the median is reported
+  bool log_transform = false;   // compress with the log transform (CompressOptions::log_transform)
+  std::uint64_t seed = 1;       // CompressOptions::seed
+  // The error on the plots' y axis and for the Pareto fronts: "rel" (relative L2) or "rmse".
+  std::string error_metric = "rel";
+  bool ssim = true;             // compute mean SSIM for every point
+  bool keep_codecs = true;      // write every codec to DIR/codecs/<method>_k<k>_c<c>.h5
+  bool render = true;           // rendered comparisons in the report
+  RenderOptions render_options; // size and scene defaults for the renders (scene/lighting are set per panel)
+  std::string command_line;     // shown in the report (how it was made)
+  void Check() const;
+};
+
+struct SweepPoint {
+  std::string method;
+  int components = 0;  // requested c
+  int clusters = 0;    // requested k (lpca), 0 for pca-view
+  int stored_components = 0, stored_clusters = 0;  // after clamping
+  std::uint64_t bytes = 0;       // Codec::StoredBytes(): coefficient arrays
+  std::uint64_t file_bytes = 0;  // size of the codec file (0 if not kept)
+  double ratio_float32 = 0, ratio_half = 0;
+  std::vector<double> compress_runs, decode_runs;  // seconds
+  double compress_s = 0, decode_s = 0;             // medians
+  double rmse = 0, max_abs = 0;
+  std::optional<double> rel_l2, psnr_db, mean_ssim;
+  double error = 0;  // the chosen error metric
+  bool pareto_bytes = false, pareto_compress = false, pareto_decode = false;
+  std::vector<std::string> warnings;
+  std::string codec_file;
+  nlohmann::json ToJson() const;
+};
+
+struct SweepRender {
+  std::string method, label, scene, lighting, file;
+  double max_rel_diff = 0;  // largest |decoded - truth| luminance relative to truth's 99th percentile
+  double mean_rel_diff = 0;
+};
+
+struct SweepSummary {
+  std::string dataset, output_dir, error_metric;
+  int views = 0, lights = 0, height = 0, width = 0, channels = 0;
+  std::uint64_t raw_float32_bytes = 0;
+  double psnr_peak = 0;
+  std::vector<SweepPoint> points;
+  std::vector<SweepRender> renders;
+  std::vector<std::string> files;  // everything written, report last
+  std::string report;
+  PhaseTimes times;
+  nlohmann::json ToJson() const;
+};
+
+// Reads the dataset into memory, sweeps, writes into output_dir (created if missing).
+SweepSummary RunSweep(const std::filesystem::path& dataset, const std::filesystem::path& output_dir,
+                      const SweepOptions& options, const Reporter& reporter = {});
+
+// Median of a non-empty list (mean of the middle two for even sizes).
+double Median(std::vector<double> values);
+
+// Base64 (RFC 4648, with padding), for data URIs.
+std::string Base64(const std::string& bytes);
+
+}  // namespace btf
