@@ -1,0 +1,388 @@
+#include "libbtf/synth/photo_synth.h"
+
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <cmath>
+
+#include "libbtf/core/error.h"
+#include "libbtf/synth/apriltag_render.h"
+#include "libbtf/synth/btf_generator.h"
+
+namespace btf {
+namespace {
+
+constexpr double kWhite = 0.8, kBlack = 0.05;  // Lambertian albedos: paper and print / table
+constexpr double kMaxViewTheta = DegToRad(89.0);
+
+struct MarkerGeom {
+  Vec2 origin;   // left-bottom corner of the detection square (plate mm)
+  Vec2 ax, ay;   // unit vectors along the tag's right and up
+  double module = 0;
+  double height = 0;  // marker plane z
+  int border_start = 0, width_at_border = 0;
+  TagBitmap bitmap;
+};
+
+std::vector<MarkerGeom> MarkerGeometry(const Board& board) {
+  std::vector<MarkerGeom> out;
+  for (const Marker& m : board.markers) {
+    MarkerGeom g;
+    g.bitmap = RenderTag(board.family, m.id);
+    g.width_at_border = g.bitmap.width_at_border;
+    g.border_start = (g.bitmap.total_width - g.width_at_border) / 2;
+    g.origin = m.corners_mm[0];
+    const Vec2 right = m.corners_mm[1] - m.corners_mm[0], up = m.corners_mm[3] - m.corners_mm[0];
+    g.ax = right.normalized();
+    g.ay = up.normalized();
+    g.module = right.norm() / g.width_at_border;
+    g.height = m.height_mm;
+    out.push_back(std::move(g));
+  }
+  return out;
+}
+
+// Albedo of the marker card at plate point p (on the marker plane), or -1 if p is off the card.
+double MarkerAlbedo(const MarkerGeom& g, const Vec2& p) {
+  const Vec2 d = p - g.origin;
+  const double s = d.dot(g.ax) / g.module, t = d.dot(g.ay) / g.module;
+  const int col = static_cast<int>(std::floor(s)) + g.border_start;
+  const int row = (g.width_at_border - 1 - static_cast<int>(std::floor(t))) + g.border_start;
+  const int T = g.bitmap.total_width;
+  if (s < -g.border_start || t < -g.border_start || col < 0 || row < 0 || col >= T || row >= T) return -1;
+  return g.bitmap.at(row, col) ? kWhite : kBlack;
+}
+
+double PlateHalfSize(const Board& board) {
+  double e = board.sample_size_mm / 2;
+  for (const Marker& m : board.markers)
+    for (const Vec2& c : m.corners_mm) e = std::max({e, std::abs(c.x()), std::abs(c.y())});
+  // Markers' quiet zone and a margin of white paper beyond the outermost detection squares.
+  const double module = (board.markers[0].corners_mm[1] - board.markers[0].corners_mm[0]).norm() / 8;
+  return e + 3 * module;
+}
+
+}  // namespace
+
+void PhotoOptions::Check() const {
+  BTF_CHECK_OPTION(views.size() >= 1 && lights.size() >= 1, "views/lights", "non-empty samplings");
+  for (int v : view_indices) BTF_CHECK_OPTION(v >= 0 && v < views.size(), "views", "index inside the view sampling");
+  for (int l : light_indices)
+    BTF_CHECK_OPTION(l >= 0 && l < lights.size(), "lights", "index inside the light sampling");
+  BTF_CHECK_OPTION(max_photos >= 0, "max-photos", ">= 0");
+  BTF_CHECK_OPTION(std::isfinite(sample_tiles) && sample_tiles > 0 && sample_tiles <= 1000, "sample-tiles", "(0, 1000]");
+  BTF_CHECK_OPTION(std::isfinite(module_mm) && module_mm >= 0, "module-mm", ">= 0");
+  BTF_CHECK_OPTION(std::isfinite(marker_height_mm) && marker_height_mm >= 0, "marker-height", ">= 0 mm");
+  BTF_CHECK_OPTION(std::isfinite(irregularity) && irregularity >= 0 && irregularity <= 0.5, "irregularity",
+                   "0..0.5 tiles");
+  BTF_CHECK_OPTION(width >= 16 && height >= 16 && width <= 16384 && height <= 16384, "width/height", "16..16384 px");
+  BTF_CHECK_OPTION(std::isfinite(camera_distance_mm) && camera_distance_mm > 0, "camera-distance", "> 0 mm");
+  BTF_CHECK_OPTION(std::isfinite(focal_px) && focal_px >= 0, "focal", ">= 0 px (0 = auto)");
+  BTF_CHECK_OPTION(std::isfinite(k1) && std::isfinite(k2) && std::abs(k1) < 1 && std::abs(k2) < 1, "k1/k2",
+                   "|k| < 1");
+  BTF_CHECK_OPTION(pixel_samples >= 1 && pixel_samples <= 16, "pixel-samples", "1..16 per axis");
+  BTF_CHECK_OPTION(std::isfinite(light_distance_mm) && light_distance_mm >= 0, "light-distance", ">= 0 mm");
+  BTF_CHECK_OPTION(std::isfinite(light_intensity) && light_intensity >= 0, "light-intensity", ">= 0");
+  BTF_CHECK_OPTION(format == "png16" || format == "png8" || format == "exr", "format", "png16, png8 or exr");
+  BTF_CHECK_OPTION(std::isfinite(exposure) && exposure >= 0, "exposure", ">= 0 (0 = auto)");
+  BTF_CHECK_OPTION(std::isfinite(noise) && noise >= 0 && noise <= 1, "noise", "0..1 of full scale");
+}
+
+nlohmann::json PhotoSummary::ToJson() const {
+  return {{"photos", photos},
+          {"seconds", seconds},
+          {"seconds_per_photo", photos ? seconds / photos : 0.0},
+          {"times", times.ToJson()}};
+}
+
+Board MakeBoard(const PhotoOptions& o, double tile_mm) {
+  Board b;
+  b.family = o.family;
+  b.sample_size_mm = o.sample_tiles * tile_mm;
+  const TagBitmap probe = RenderTag(o.family, 0);
+  const double m = o.module_mm > 0 ? o.module_mm : b.sample_size_mm / 20;
+  const double det = probe.width_at_border * m, card = probe.total_width * m;
+  // Card centres one module outside the sample edge, in a ring of 8 (corners and mid-sides).
+  const double d = b.sample_size_mm / 2 + m + card / 2;
+  const int ring[8][2] = {{-1, -1}, {0, -1}, {1, -1}, {1, 0}, {1, 1}, {0, 1}, {-1, 1}, {-1, 0}};
+  for (int k = 0; k < 8; ++k) {
+    Marker mk;
+    mk.id = k;
+    const Vec2 c(ring[k][0] * d, ring[k][1] * d);
+    const double h = det / 2;
+    mk.corners_mm = {c + Vec2(-h, -h), c + Vec2(h, -h), c + Vec2(h, h), c + Vec2(-h, h)};
+    mk.height_mm = o.marker_height_mm;
+    b.markers.push_back(mk);
+  }
+  b.Check("generated board");
+  return b;
+}
+
+bool CameraPose::Project(const Vec3& X, Vec2* pixel) const {
+  const Vec3 p = rotation * X + translation;
+  if (p.z() <= 1e-9) return false;
+  const double x = p.x() / p.z(), y = p.y() / p.z();
+  const double r2 = x * x + y * y;
+  const double s = 1 + camera.k1 * r2 + camera.k2 * r2 * r2;
+  *pixel = Vec2(camera.fx * x * s + camera.cx, camera.fy * y * s + camera.cy);
+  return true;
+}
+
+Eigen::Matrix3d CameraPose::PlateHomography() const {
+  Eigen::Matrix3d K;
+  K << camera.fx, 0, camera.cx, 0, camera.fy, camera.cy, 0, 0, 1;
+  Eigen::Matrix3d Rt;
+  Rt.col(0) = rotation.col(0);
+  Rt.col(1) = rotation.col(1);
+  Rt.col(2) = translation;
+  Eigen::Matrix3d H = K * Rt;
+  return H / H(2, 2);
+}
+
+CameraPose MakeCamera(const PhotoOptions& o, const Board& board, const Vec3& view_dir) {
+  const Vec3 v = view_dir.normalized();
+  if (!(v.z() > std::cos(kMaxViewTheta)))
+    ThrowUsage("view direction ({:.4f}, {:.4f}, {:.4f}) is beyond 89 degrees: the camera cannot see the plate", v.x(),
+               v.y(), v.z());
+  CameraPose c;
+  c.camera.width = o.width;
+  c.camera.height = o.height;
+  const double f = o.focal_px > 0 ? o.focal_px
+                                  : 0.9 * 0.5 * std::min(o.width, o.height) * o.camera_distance_mm / PlateHalfSize(board);
+  c.camera.fx = c.camera.fy = f;
+  c.camera.cx = 0.5 * (o.width - 1);
+  c.camera.cy = 0.5 * (o.height - 1);
+  c.camera.k1 = o.k1;
+  c.camera.k2 = o.k2;
+  c.centre = o.camera_distance_mm * v;
+  // OpenCV camera: z forward (to the plate centre), y down, x = y cross z. Image up follows plate +y.
+  const Vec3 zc = -v;
+  const Vec3 up = Vec3::UnitY() - Vec3::UnitY().dot(zc) * zc;
+  const Vec3 yc = -up.normalized();
+  const Vec3 xc = yc.cross(zc);
+  c.rotation.row(0) = xc.transpose();
+  c.rotation.row(1) = yc.transpose();
+  c.rotation.row(2) = zc.transpose();
+  c.translation = -c.rotation * c.centre;
+  return c;
+}
+
+Image RenderPhoto(const SvbrdfModel& model, const Board& board, const PhotoOptions& o, const CameraPose& cam,
+                  const Vec3& view_dir_in, const Vec3& light_dir_in) {
+  if (model.channels() != 3) ThrowUsage("photo synthesis needs an RGB model, '{}' has {} channels", model.name(),
+                                        model.channels());
+  const Vec3 view_dir = view_dir_in.normalized(), light_dir = light_dir_in.normalized();
+  const std::vector<MarkerGeom> markers = MarkerGeometry(board);
+  const double half_sample = board.sample_size_mm / 2, plate_half = PlateHalfSize(board);
+  const double tile = model.tile_size_mm();
+  const PatternWarp warp(o.irregularity, o.irregularity_seed);
+  const double intensity =
+      o.light_intensity > 0 ? o.light_intensity : (o.light_distance_mm > 0 ? o.light_distance_mm * o.light_distance_mm : 1.0);
+  const Vec3 light_pos = o.light_distance_mm * light_dir;
+  auto irradiance = [&](const Vec3& X) {
+    if (o.light_distance_mm <= 0) return intensity * std::max(0.0, light_dir.z());
+    const Vec3 r = light_pos - X;
+    const double r2 = r.squaredNorm();
+    return intensity * std::max(0.0, r.z() / std::sqrt(r2)) / r2;
+  };
+  auto light_from = [&](const Vec3& X) -> Vec3 {
+    return o.light_distance_mm > 0 ? Vec3((light_pos - X).normalized()) : light_dir;
+  };
+  const int W = o.width, H = o.height, n = o.pixel_samples;
+  const auto& K = cam.camera;
+  const Eigen::Matrix3d Rt = cam.rotation.transpose();
+  Image img(W, H, 3);
+#pragma omp parallel
+  {
+    std::vector<Vec2> uvs;
+    std::vector<int> owner;
+    std::vector<double> weight;
+    std::vector<float> vals;
+    std::vector<double> acc(static_cast<std::size_t>(W) * 3);
+#pragma omp for schedule(dynamic, 4)
+    for (int py = 0; py < H; ++py) {
+      std::fill(acc.begin(), acc.end(), 0.0);
+      uvs.clear();
+      owner.clear();
+      weight.clear();
+      for (int px = 0; px < W; ++px) {
+        for (int j = 0; j < n; ++j)
+          for (int i = 0; i < n; ++i) {
+            // Sub-pixel position (OpenCV: pixel centre at integer coordinates), undistorted.
+            const double xd = (px + (i + 0.5) / n - 0.5 - K.cx) / K.fx, yd = (py + (j + 0.5) / n - 0.5 - K.cy) / K.fy;
+            double xu = xd, yu = yd;
+            if (K.k1 != 0 || K.k2 != 0)
+              for (int it = 0; it < 20; ++it) {
+                const double r2 = xu * xu + yu * yu;
+                const double s = 1 + K.k1 * r2 + K.k2 * r2 * r2;
+                xu = xd / s;
+                yu = yd / s;
+              }
+            const Vec3 dir = Rt * Vec3(xu, yu, 1);
+            if (dir.z() >= 0) continue;  // ray misses the plate: black
+            double* a = &acc[static_cast<std::size_t>(px) * 3];
+            // Marker cards first (they lie at or above the material surface).
+            bool hit = false;
+            for (const MarkerGeom& g : markers) {
+              const double t = (g.height - cam.centre.z()) / dir.z();
+              const Vec3 X = cam.centre + t * dir;
+              const double alb = MarkerAlbedo(g, X.head<2>());
+              if (alb < 0) continue;
+              const double L = alb / kPi * irradiance(X);
+              a[0] += L, a[1] += L, a[2] += L;
+              hit = true;
+              break;
+            }
+            if (hit) continue;
+            const double t0 = -cam.centre.z() / dir.z();
+            const Vec3 X = cam.centre + t0 * dir;
+            const double E = irradiance(X);
+            if (std::abs(X.x()) <= half_sample && std::abs(X.y()) <= half_sample) {
+              const Vec2 uv = warp.Apply(Vec2((X.x() + half_sample) / tile, (X.y() + half_sample) / tile));
+              if (o.true_directions) {
+                float f[3];
+                model.Eval(uv, light_from(X), (cam.centre - X).normalized(), f);
+                a[0] += f[0] * E, a[1] += f[1] * E, a[2] += f[2] * E;
+              } else {
+                uvs.push_back(uv);
+                owner.push_back(px);
+                weight.push_back(E);
+              }
+            } else {
+              const double alb = (std::abs(X.x()) <= plate_half && std::abs(X.y()) <= plate_half) ? kWhite : kBlack;
+              const double L = alb / kPi * E;
+              a[0] += L, a[1] += L, a[2] += L;
+            }
+          }
+      }
+      if (!uvs.empty()) {
+        // One batch per row: the model's per-direction work is done once.
+        vals.resize(uvs.size() * 3);
+        model.EvalBatch(light_dir, view_dir, uvs.data(), static_cast<int>(uvs.size()), vals.data());
+        for (std::size_t k = 0; k < uvs.size(); ++k)
+          for (int c = 0; c < 3; ++c) acc[static_cast<std::size_t>(owner[k]) * 3 + c] += vals[k * 3 + c] * weight[k];
+      }
+      const double inv = 1.0 / (n * n);
+      for (int px = 0; px < W; ++px)
+        for (int c = 0; c < 3; ++c) img.at(px, py, c) = static_cast<float>(acc[static_cast<std::size_t>(px) * 3 + c] * inv);
+    }
+  }
+  return img;
+}
+
+std::vector<std::pair<int, int>> SelectPhotos(const PhotoOptions& o) {
+  std::vector<int> vs = o.view_indices, ls = o.light_indices;
+  if (vs.empty())
+    for (int i = 0; i < o.views.size(); ++i) vs.push_back(i);
+  if (ls.empty())
+    for (int i = 0; i < o.lights.size(); ++i) ls.push_back(i);
+  std::vector<std::pair<int, int>> all;
+  for (int v : vs)
+    for (int l : ls) all.emplace_back(v, l);
+  if (o.max_photos <= 0 || o.max_photos >= static_cast<int>(all.size())) return all;
+  std::vector<std::pair<int, int>> out;
+  const double step = static_cast<double>(all.size()) / o.max_photos;
+  for (int k = 0; k < o.max_photos; ++k) out.push_back(all[static_cast<std::size_t>((k + 0.5) * step)]);
+  return out;
+}
+
+PhotoSummary SynthesizePhotos(const SvbrdfModel& model, const PhotoOptions& o, const std::filesystem::path& dir,
+                              const Reporter& reporter, const nlohmann::json& extra) {
+  o.Check();
+  Timer total;
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (!std::filesystem::is_directory(dir))
+    ThrowIo("cannot create output folder '{}': {}", dir.string(), ec ? ec.message() : "not a folder");
+  const Board board = MakeBoard(o, model.tile_size_mm());
+  const auto pairs = SelectPhotos(o);
+  for (const auto& [v, l] : pairs) MakeCamera(o, board, o.views[v]);  // fail fast on impossible views
+  const double intensity =
+      o.light_intensity > 0 ? o.light_intensity : (o.light_distance_mm > 0 ? o.light_distance_mm * o.light_distance_mm : 1.0);
+  Manifest manifest;
+  manifest.board_file = "board.json";
+  manifest.views = o.views;
+  manifest.lights = o.lights;
+  manifest.bit_depth = o.format == "exr" ? 0 : (o.format == "png8" ? 8 : 16);
+  manifest.extra = extra.is_object() ? extra : nlohmann::json::object();
+  manifest.extra["model"] = model.Describe();
+  manifest.extra["model_name"] = model.name();
+  manifest.extra["tile_size_mm"] = model.tile_size_mm();
+  manifest.extra["sample_tiles"] = o.sample_tiles;
+  manifest.extra["irregularity"] = PatternWarp(o.irregularity, o.irregularity_seed).Describe();
+  manifest.extra["irregularity_seed"] = o.irregularity_seed;
+  manifest.extra["pixel_samples_per_axis"] = o.pixel_samples;
+  manifest.extra["directions"] = o.true_directions ? "per point (true)" : "nominal per photo";
+  manifest.extra["noise_sd"] = o.noise;
+  std::vector<PhotoTruth> truth;
+  PhotoSummary summary;
+  PhaseTimes times;
+  ImageWriteOptions wopt;
+  wopt.has_format = true;
+  wopt.format = o.format == "exr" ? PixelFormat::kFloat : (o.format == "png8" ? PixelFormat::kUint8 : PixelFormat::kUint16);
+  wopt.srgb = false;
+  const std::string ext = o.format == "exr" ? ".exr" : ".png";
+  for (std::size_t k = 0; k < pairs.size(); ++k) {
+    reporter.Progress(k, pairs.size(), "photos");
+    const auto [vi, li] = pairs[k];
+    const Vec3 vdir = o.views[vi], ldir = o.lights[li];
+    const CameraPose cam = MakeCamera(o, board, vdir);
+    Timer t;
+    Image img = RenderPhoto(model, board, o, cam, vdir, ldir);
+    times.Add("render", t.Seconds());
+    t.Restart();
+    double peak = 0;
+    for (float x : img.pixels) peak = std::max(peak, static_cast<double>(x));
+    double exposure = o.exposure;
+    if (exposure <= 0) exposure = (o.format == "exr" || peak <= 0) ? 1.0 : 0.9 / peak;
+    for (std::size_t i = 0; i < img.pixels.size(); ++i) {
+      double x = exposure * img.pixels[i];
+      if (o.noise > 0) {  // Box-Muller on a hash: the same noise whatever the thread count
+        const double u1 = std::max(HashUniform(o.seed, k * 2 + 1, i), 1e-300), u2 = HashUniform(o.seed, k * 2 + 2, i);
+        x += o.noise * std::sqrt(-2 * std::log(u1)) * std::cos(2 * kPi * u2);
+      }
+      img.pixels[i] = static_cast<float>(std::max(0.0, x));
+    }
+    const std::string file = fmt::format("v{:03d}_l{:03d}{}", vi, li, ext);
+    WriteImage(dir / file, img, wopt);
+    times.Add("write", t.Seconds());
+    PhotoEntry e;
+    e.file = file;
+    e.view_index = vi;
+    e.light_index = li;
+    e.view_dir = vdir.normalized();
+    e.light_dir = ldir.normalized();
+    e.exposure = exposure;
+    e.light_intensity = intensity;
+    e.light_distance_mm = o.light_distance_mm;
+    e.camera_distance_mm = o.camera_distance_mm;
+    e.camera = cam.camera;
+    manifest.photos.push_back(e);
+    PhotoTruth tr;
+    tr.file = file;
+    tr.plate_to_image = cam.PlateHomography();
+    tr.rotation = cam.rotation;
+    tr.translation = cam.translation;
+    for (const Marker& m : board.markers) {
+      std::array<Vec2, 4> px;
+      bool visible = true;
+      for (int q = 0; q < 4; ++q) {
+        visible = visible && cam.Project(Vec3(m.corners_mm[q].x(), m.corners_mm[q].y(), m.height_mm), &px[q]);
+        visible = visible && px[q].x() >= 1 && px[q].y() >= 1 && px[q].x() <= o.width - 2 && px[q].y() <= o.height - 2;
+      }
+      if (visible) tr.marker_corners_px[m.id] = px;
+    }
+    truth.push_back(std::move(tr));
+    summary.files.push_back(file);
+  }
+  reporter.Progress(pairs.size(), pairs.size(), "photos");
+  WriteBoard(dir / "board.json", board);
+  WriteTruth(dir / "truth.json", truth);
+  WriteManifest(dir / "manifest.json", manifest);  // last: its presence means the set is complete
+  summary.photos = static_cast<int>(pairs.size());
+  summary.seconds = total.Seconds();
+  summary.times = times;
+  return summary;
+}
+
+}  // namespace btf

@@ -1,0 +1,88 @@
+#pragma once
+// Synthetic measurement photos: a sample plate (material in the middle, a ring of AprilTag
+// markers around it) seen by a pinhole camera from each view direction under a directional or
+// point light from each light direction. Writes the photos, board.json, manifest.json and
+// truth.json (libbtf/io/rig.h, docs/format.md).
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+
+#include "libbtf/core/progress.h"
+#include "libbtf/core/timer.h"
+#include "libbtf/io/image_io.h"
+#include "libbtf/io/rig.h"
+#include "libbtf/synth/model.h"
+
+namespace btf {
+
+struct PhotoOptions {
+  Sampling views = Sampling::Bonn81();   // the full view sampling (indices refer to it)
+  Sampling lights = Sampling::Bonn81();  // the full light sampling
+  std::vector<int> view_indices;         // empty = all views
+  std::vector<int> light_indices;        // empty = all lights
+  int max_photos = 0;                    // 0 = every (view, light) pair; else an even spread
+  // Plate and markers.
+  double sample_tiles = 10;       // sample region side in tiles (side = sample_tiles * tile_mm)
+  double module_mm = 0;           // marker module size; 0 = sample side / 20
+  double marker_height_mm = 0;    // marker plane above the material surface
+  std::string family = "tag36h11";
+  double irregularity = 0;        // PatternWarp RMS displacement, tiles (as btf-synth btf)
+  std::uint64_t irregularity_seed = 7;
+  // Camera.
+  int width = 1280, height = 960;
+  double camera_distance_mm = 500;
+  double focal_px = 0;            // 0 = the plate fills 90 % of the image height at 0 deg
+  double k1 = 0, k2 = 0;          // radial distortion (OpenCV model)
+  int pixel_samples = 3;          // per axis, box filter over the pixel
+  // Light.
+  double light_distance_mm = 0;   // 0 = directional
+  double light_intensity = 0;     // 0 = 1 (directional) or distance^2 (point: irradiance 1 at the centre)
+  bool true_directions = false;   // evaluate the BTF with per-point directions (default: nominal)
+  // Sensor.
+  std::string format = "png16";   // "png16", "png8" or "exr"
+  double exposure = 0;            // 0 = auto: brightest pixel at 0.9 of full scale (1 for exr)
+  double noise = 0;               // Gaussian read noise, SD as a fraction of full scale
+  std::uint64_t seed = 1;         // noise seed
+  void Check() const;
+};
+
+struct PhotoSummary {
+  int photos = 0;
+  double seconds = 0;
+  std::vector<std::string> files;
+  PhaseTimes times;
+  nlohmann::json ToJson() const;
+};
+
+// The plate layout for a model's tile size (8 markers in a ring, ids 0..7, upright).
+Board MakeBoard(const PhotoOptions& options, double tile_mm);
+
+// A camera at `view_dir` x distance looking at the plate centre (image up ~ plate +y).
+struct CameraPose {
+  CameraModel camera;
+  Eigen::Matrix3d rotation;  // camera_from_plate
+  Vec3 translation;          // camera_from_plate, mm
+  Vec3 centre;               // camera centre in plate mm
+  // Plate point (mm) -> pixel (OpenCV convention), distortion applied. False if behind the camera.
+  bool Project(const Vec3& plate_point, Vec2* pixel) const;
+  // The z = 0 homography plate mm -> undistorted pixels.
+  Eigen::Matrix3d PlateHomography() const;
+};
+CameraPose MakeCamera(const PhotoOptions& options, const Board& board, const Vec3& view_dir);
+
+// Radiance image (linear float RGB, before exposure) of the plate for one view and light.
+Image RenderPhoto(const SvbrdfModel& model, const Board& board, const PhotoOptions& options, const CameraPose& cam,
+                  const Vec3& view_dir, const Vec3& light_dir);
+
+// The (view index, light index) pairs to shoot: the subsets, then the even spread.
+std::vector<std::pair<int, int>> SelectPhotos(const PhotoOptions& options);
+
+// Renders and writes the whole set into `dir` (created if missing). Each file atomically.
+PhotoSummary SynthesizePhotos(const SvbrdfModel& model, const PhotoOptions& options, const std::filesystem::path& dir,
+                              const Reporter& reporter = {}, const nlohmann::json& extra = {});
+
+}  // namespace btf
