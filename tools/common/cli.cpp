@@ -69,6 +69,8 @@ class ProgressDisplay {
 }  // namespace
 
 Reporter MakeReporter(const CommonFlags& flags) {
+  // --quiet keeps warnings and errors only; --verbose adds debug lines.
+  spdlog::set_level(flags.quiet ? spdlog::level::warn : flags.verbose ? spdlog::level::debug : spdlog::level::info);
   auto display = std::make_shared<ProgressDisplay>(flags.quiet);
   return Reporter(
       [](LogLevel level, std::string_view msg) {
