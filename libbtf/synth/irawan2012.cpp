@@ -193,7 +193,6 @@ double Irawan2012Model::Band(const Local& loc, Vec3 wi, Vec3 wo) const {
   const double len = sum.norm();  // = 2 cos(theta_d)
   if (!(len > 1e-12)) return 0;
   const Vec3 h = sum / len;
-  const double fc = yc.alpha + std::exp(yc.beta * (-wi.dot(wo)) - std::abs(yc.beta)) * yc.vm_norm;
   const double hw = pattern_.h_width;
 
   if (!yc.staple) {
@@ -201,6 +200,10 @@ double Irawan2012Model::Band(const Local& loc, Vec3 wi, Vec3 wo) const {
     if (!(umax > 0)) return 0;
     const double u_star = std::atan(h.y() / h.z());  // h.z > 0 above the surface
     if (!(std::abs(u_star) < umax)) return 0;
+    // Band test first: most points of a segment lie outside its highlight band.
+    const double dy = l * hw;
+    const double y_star = std::clamp(u_star * 0.5 * l / umax, -0.5 * (l - dy), 0.5 * (l - dy));
+    if (!(std::abs(y_star - loc.y) < 0.5 * dy)) return 0;
     const double v = loc.x * kPi / w;
     const double umax_s = (1 - yc.ss) * umax;
     const double R = SpineRadius(std::min(std::abs(u_star), umax_s), umax_s, y.kappa, w, l);
@@ -210,10 +213,8 @@ double Irawan2012Model::Band(const Local& loc, Vec3 wi, Vec3 wo) const {
     const Vec3 n(std::sin(v), std::sin(u_star) * std::cos(v), std::cos(u_star) * std::cos(v));
     double A = Seeliger(n.dot(wi), n.dot(wo));
     if (yc.ss > 0) A *= 1 - SmoothStep01((std::abs(u_star) - umax_s) / (yc.ss * umax));
-    const double fs = Gu * fc * A * kPi * l;  // pi l: the reference's domain transform
-    const double dy = l * hw;
-    const double y_star = std::clamp(u_star * 0.5 * l / umax, -0.5 * (l - dy), 0.5 * (l - dy));
-    const double value = std::abs(y_star - loc.y) < 0.5 * dy ? fs / dy : 0.0;
+    const double fc = yc.alpha + std::exp(yc.beta * (-wi.dot(wo)) - std::abs(yc.beta)) * yc.vm_norm;
+    const double value = Gu * fc * A * kPi * l / dy;  // pi l: the reference's domain transform
     return std::isfinite(value) && value > 0 ? value : 0.0;
   }
 
@@ -227,15 +228,16 @@ double Irawan2012Model::Band(const Local& loc, Vec3 wi, Vec3 wo) const {
   if (!(std::abs(D) < 1)) return 0;
   const double v_star = std::atan2(-B, h.x()) + std::acos(D);
   if (!(std::abs(v_star) < kPi / 2)) return 0;
+  const double dx = w * hw;
+  const double x_star = std::clamp(v_star * w / kPi, -0.5 * (w - dx), 0.5 * (w - dx));
+  if (!(std::abs(x_star - loc.x) < 0.5 * dx)) return 0;  // outside the highlight band
   const Vec3 n(std::sin(v_star), su * std::cos(v_star), cu * std::cos(v_star));
   const double A = Seeliger(n.dot(wi), n.dot(wo));
   if (A == 0) return 0;  // also guarantees n.h > 0 below
   const double R = SpineRadius(std::abs(u), umax, y.kappa, w, l);
   const double Gv = a * (R + a * std::cos(v_star)) / (len * n.dot(h) * std::abs(std::sin(y.psi)));
-  const double fs = Gv * fc * A * 2 * w * umax;  // 2 w umax: the reference's domain transform
-  const double dx = w * hw;
-  const double x_star = std::clamp(v_star * w / kPi, -0.5 * (w - dx), 0.5 * (w - dx));
-  const double value = std::abs(x_star - loc.x) < 0.5 * dx ? fs / dx : 0.0;
+  const double fc = yc.alpha + std::exp(yc.beta * (-wi.dot(wo)) - std::abs(yc.beta)) * yc.vm_norm;
+  const double value = Gv * fc * A * 2 * w * umax / dx;  // 2 w umax: the reference's domain transform
   return std::isfinite(value) && value > 0 ? value : 0.0;
 }
 
