@@ -247,7 +247,16 @@ nlohmann::json Sadeghi2013Model::Describe() const {
           {"masking_sigma_deg", RadToDeg(params_.masking_sigma)},
           {"tangent_step_deg", RadToDeg(params_.tangent_step)},
           {"tile_mm", params_.tile_mm},
-          {"threads", threads}};
+          {"threads", threads},
+          {"choices",
+           {"Eq. 14 read as a surface BRDF: f = sum_j a_j P_j sum_t w_t f_s M / Q, integrated against the fabric's "
+            "cos(theta_i)",
+            "transmission Fresnel F = (1 - Fr)^2 at the surface term's effective angle",
+            "thread 1 runs along the warp (+y), thread 2 along the weft (+x)",
+            "tangent curves piecewise linear between control points, midpoint samples at most tangent_step_deg apart",
+            "psi of Eq. 11 measured in the plane of the untilted thread direction and the normal",
+            "cos^2(theta_d) capped below at cos^2(89.9 deg); a direction along t has azimuth 0",
+            "Eq. 15's gap term makes fabrics with a1 + a2 < 1 non-reciprocal"}}};
 }
 
 namespace {

@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <random>
+#include <tuple>
 
 #include "libbtf/core/error.h"
 
@@ -169,6 +170,34 @@ TEST(Sadeghi2013Model, FiniteEverywhereAndConstantOverTheTile) {
     EXPECT_EQ(below[0], 0.0);
     m->EvalRgb(wi, Vec3(0.3, 0, -1e-9), below);
     EXPECT_EQ(below[0], 0.0);
+  }
+}
+
+TEST(Sadeghi2013Model, PresetsParametersAndErrors) {
+  EXPECT_EQ(Sadeghi2013PresetNames().size(), 6u);
+  const auto m = MakeSadeghi2013Model("charmeuse_front", {{"eta", 1.6}});
+  EXPECT_EQ(m->name(), "sadeghi2013/charmeuse_front");
+  const auto d = m->Describe();
+  EXPECT_DOUBLE_EQ(d["eta"].get<double>(), 1.6);
+  ASSERT_EQ(d["threads"].size(), 2u);
+  EXPECT_DOUBLE_EQ(d["threads"][0]["coverage"].get<double>(), 0.9);
+  EXPECT_NEAR(d["threads"][0]["gamma_s_deg"].get<double>(), 2.5, 1e-12);
+  EXPECT_GE(d["choices"].size(), 5u);
+  // The steeper of the flat thread's pieces (-18 .. 0 deg over length 2) needs 36 samples at 0.5 deg.
+  EXPECT_GT(d["threads"][0]["tangent_samples"].get<int>(), 100);
+  for (const auto& [preset, params, field] : std::vector<std::tuple<std::string, nlohmann::json, std::string>>{
+           {"denim", nlohmann::json::object(), "denim"},
+           {"velvet", {{"eta", 1.0}}, "eta"},
+           {"velvet", {{"eta", "x"}}, "eta"},
+           {"velvet", {{"sigma", 10}}, "sigma"},
+           {"velvet", {{"tangent_step_deg", 0}}, "tangent_step_deg"}}) {
+    try {
+      MakeSadeghi2013(preset, params);
+      ADD_FAILURE() << preset << " " << params.dump();
+    } catch (const Error& e) {
+      EXPECT_EQ(e.code(), ExitCode::kUsage);
+      EXPECT_NE(std::string(e.what()).find(field), std::string::npos) << e.what();
+    }
   }
 }
 
