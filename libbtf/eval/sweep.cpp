@@ -28,6 +28,8 @@ void SweepOptions::Check() const {
                    "lpca needs at least one cluster count");
   BTF_CHECK_OPTION(runs >= 1 && runs <= 100, "runs", "must be 1..100");
   BTF_CHECK_OPTION(error_metric == "rel" || error_metric == "rmse", "error_metric", "must be rel or rmse");
+  BTF_CHECK_OPTION(std::isfinite(render_max_rel_error) && render_max_rel_error >= 0, "render_max_rel_error",
+                   "must be >= 0");
   render_options.Check();
 }
 
@@ -95,7 +97,7 @@ void WritePng(const std::filesystem::path& path, const Image& image) {
 // One plot of error against a cost, one series per (method, k), Pareto front marked.
 Plot CostPlot(const std::vector<SweepPoint>& points, const std::string& title, const std::string& x_label,
               const std::string& y_label, double SweepPoint::*cost_d, std::uint64_t SweepPoint::*cost_u,
-              const std::vector<int>& front) {
+              const std::vector<int>& front, bool join) {
   Plot plot;
   plot.title = title;
   plot.x_label = x_label;
@@ -111,7 +113,7 @@ Plot CostPlot(const std::vector<SweepPoint>& points, const std::string& title, c
       s.name = key;
       s.colour = SeriesColour(int(plot.series.size()));
       s.shape = int(plot.series.size());
-      s.line = true;
+      s.line = join;
       plot.series.push_back(s);
     }
     auto& s = plot.series[series_of[key]];
@@ -177,7 +179,8 @@ std::string ReportHtml(const SweepSummary& s, const SweepOptions& o, const std::
   if (!s.renders.empty()) {
     h += "<h2>Rendered comparison</h2>\n<p>Ground truth = the dataset, interpolated between its sampled directions "
          "(barycentric over the three nearest views &times; lights, nearest texel); decoded = the codec's own "
-         "arbitrary-direction decoder. For each method the setting with the lowest error is shown. Both images share "
+         "arbitrary-direction decoder. For each method the smallest setting with a relative error of at most " +
+         fmt::format("{:g} %", 100 * o.render_max_rel_error) + " is shown (else the most accurate one). Both images share "
          "one exposure; the difference is |decoded &minus; truth| in luminance relative to the truth's "
          "99th-percentile luminance, in false colour (dark blue 0, yellow = full scale). Environment lighting sums "
          + std::to_string(o.render_options.environment_samples) +
@@ -195,7 +198,8 @@ std::string ReportHtml(const SweepSummary& s, const SweepOptions& o, const std::
        "<li>SSIM: mean over images, texels and channels of Wang et al. (2004) SSIM with a Gaussian window "
        "(&sigma; = 1.5 texels, truncated at 3&sigma;), C1 = (0.01 peak)&sup2;, C2 = (0.03 peak)&sup2;</li>"
        "<li>Times: wall clock on this machine, median of the runs; compression from an in-memory dataset, decoding "
-       "of the whole BTF to memory (Codec::DecodeAll).</li></ul>\n";
+       "of the whole BTF to memory (Codec::DecodeAll; each run repeats it for at least 20 ms and reports the time "
+       "per decode). Other processes on the machine add noise.</li></ul>\n";
   h += "<p>Data: <code>results.json</code> next to this file. Definitions: docs/btf-eval.md.</p>\n</body></html>\n";
   return h;
 }
@@ -275,7 +279,13 @@ SweepSummary RunSweep(const std::filesystem::path& dataset_path, const std::file
         todo.push_back(p);
       }
   }
-  std::map<std::string, std::pair<double, Codec>> best;  // lowest-error codec per method, for renders
+  // The codec each method renders (see SweepOptions::render_max_rel_error), with its point index.
+  struct Chosen {
+    std::size_t index;
+    bool within;  // meets the error bound
+    Codec codec;
+  };
+  std::map<std::string, Chosen> chosen;
   CompareOptions co;
   co.ssim = o.ssim;
   for (std::size_t i = 0; i < todo.size(); ++i) {
@@ -301,11 +311,17 @@ SweepSummary RunSweep(const std::filesystem::path& dataset_path, const std::file
     p.bytes = codec.StoredBytes();
     p.ratio_float32 = p.bytes ? double(codec.RawBytes(4)) / double(p.bytes) : 0;
     p.ratio_half = p.bytes ? double(codec.RawBytes(2)) / double(p.bytes) : 0;
+    // Decoding small codecs takes microseconds: each run repeats it until it has taken at least
+    // 20 ms and reports the time per decode, so scheduler noise does not dominate.
     Dataset decoded;
     for (int r = 0; r < o.runs; ++r) {
       Timer t;
-      decoded = codec.DecodeAll();
-      p.decode_runs.push_back(t.Seconds());
+      int n = 0;
+      do {
+        decoded = codec.DecodeAll();
+        ++n;
+      } while (t.Seconds() < 0.02);
+      p.decode_runs.push_back(t.Seconds() / n);
     }
     p.compress_s = Median(p.compress_runs);
     p.decode_s = Median(p.decode_runs);
@@ -321,8 +337,16 @@ SweepSummary RunSweep(const std::filesystem::path& dataset_path, const std::file
     }
     reporter.Info("{}: {} bytes (ratio {:.1f}), compress {:.4g} s, decode {:.4g} s, {} {:.5g}", PointName(p), p.bytes,
                   p.ratio_float32, p.compress_s, p.decode_s, o.error_metric, p.error);
-    auto it = best.find(p.method);
-    if (it == best.end() || p.error < it->second.first) best.insert_or_assign(p.method, std::make_pair(p.error, std::move(codec)));
+    if (o.render) {
+      const bool within = p.rel_l2 && *p.rel_l2 <= o.render_max_rel_error;
+      auto it = chosen.find(p.method);
+      bool take = it == chosen.end();
+      if (!take) {
+        const SweepPoint& q = s.points[it->second.index];
+        take = within ? (!it->second.within || p.bytes < q.bytes) : (!it->second.within && p.error < q.error);
+      }
+      if (take) chosen.insert_or_assign(p.method, Chosen{s.points.size(), within, std::move(codec)});
+    }
     s.points.push_back(std::move(p));
   }
   reporter.Progress(todo.size(), todo.size(), "sweep");
@@ -339,11 +363,11 @@ SweepSummary RunSweep(const std::filesystem::path& dataset_path, const std::file
   for (int i : fd) s.points[i].pareto_decode = true;
   const std::string ylab = o.error_metric == "rel" ? "relative L2 error" : "RMSE";
   const std::vector<std::pair<std::string, Plot>> plots = {
-      {"error_vs_bytes", CostPlot(s.points, ylab + " vs stored bytes", "stored bytes", ylab, nullptr, &SweepPoint::bytes, fb)},
+      {"error_vs_bytes", CostPlot(s.points, ylab + " vs stored bytes", "stored bytes", ylab, nullptr, &SweepPoint::bytes, fb, true)},
       {"error_vs_compress_time",
-       CostPlot(s.points, ylab + " vs compression time", "compression time (s, median)", ylab, &SweepPoint::compress_s, nullptr, fc)},
+       CostPlot(s.points, ylab + " vs compression time", "compression time (s, median)", ylab, &SweepPoint::compress_s, nullptr, fc, false)},
       {"error_vs_decode_time",
-       CostPlot(s.points, ylab + " vs decoding time", "decoding time (s, median)", ylab, &SweepPoint::decode_s, nullptr, fd)}};
+       CostPlot(s.points, ylab + " vs decoding time", "decoding time (s, median)", ylab, &SweepPoint::decode_s, nullptr, fd, false)}};
   std::vector<std::string> plot_names;
   for (const auto& [name, plot] : plots) {
     WriteTextFileAtomic(dir / (name + ".svg"), PlotSvg(plot));
@@ -365,13 +389,10 @@ SweepSummary RunSweep(const std::filesystem::path& dataset_path, const std::file
       ro.lighting = lighting;
       const Image truth_img = Render(*gt, ro);
       for (const auto& m : o.methods) {
-        const auto it = best.find(m);
-        if (it == best.end()) continue;
-        const SweepPoint* bp = nullptr;
-        for (const auto& p : s.points)
-          if (p.method == m && p.error == it->second.first) bp = &p;
-        const std::string label = bp ? PointName(*bp) : m;
-        const Image test_img = Render(*CodecEvaluator(it->second.second), ro);
+        const auto it = chosen.find(m);
+        if (it == chosen.end()) continue;
+        const std::string label = PointName(s.points[it->second.index]);
+        const Image test_img = Render(*CodecEvaluator(it->second.codec), ro);
         SweepRender r;
         r.method = m, r.label = label, r.scene = scene, r.lighting = lighting;
         PanelStats ps;

@@ -28,6 +28,9 @@ struct SweepOptions {
   bool ssim = true;             // compute mean SSIM for every point
   bool keep_codecs = true;      // write every codec to DIR/codecs/<method>_k<k>_c<c>.h5
   bool render = true;           // rendered comparisons in the report
+  // Which setting of each method is rendered: the smallest (fewest bytes) whose relative L2 error
+  // is <= render_max_rel_error, or the most accurate one if none is (or the error is undefined).
+  double render_max_rel_error = 0.02;
   RenderOptions render_options; // size and scene defaults for the renders (scene/lighting are set per panel)
   std::string command_line;     // shown in the report (how it was made)
   void Check() const;

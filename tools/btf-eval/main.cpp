@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include "libbtf/eval/metrics.h"
+#include "libbtf/eval/stability.h"
 #include "libbtf/eval/sweep.h"
 #include "tools/common/cli.h"
 
@@ -89,8 +90,33 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   btf::cli::AddCommonFlags(*sweep, common);
 
+  // stability
+  auto* stability = app.add_subcommand("stability", "Run the numerical stability suite (stiff and extreme cases "
+                                                    "through synth, compress, metrics and render); exit 1 if any fails");
+  btf::StabilityOptions stab;
+  bool list_cases = false;
+  stability->add_option("--only", stab.only, "Run only cases whose name starts with one of these prefixes");
+  stability->add_flag("--list", list_cases, "List the case names and exit");
+  btf::cli::AddCommonFlags(*stability, common);
+
   return btf::cli::Main(argc, argv, app, [&]() -> int {
     const btf::Reporter reporter = btf::cli::MakeReporter(common);
+    if (*stability) {
+      if (list_cases) {
+        for (const auto& n : btf::StabilityCaseNames()) fmt::print("{}\n", n);
+        return 0;
+      }
+      const btf::StabilitySummary s = btf::RunStability(stab, reporter);
+      if (common.json) {
+        btf::cli::PrintJson(s.ToJson());
+      } else {
+        for (const auto& c : s.cases)
+          fmt::print("{} {:<34} {:>6.2f} s  {}\n     criterion: {}\n", c.passed ? "PASS" : "FAIL", c.name, c.seconds,
+                     c.figure, c.criterion);
+        fmt::print("{} passed, {} failed\n", s.passed, s.failed);
+      }
+      return s.failed ? static_cast<int>(btf::ExitCode::kFailedCheck) : 0;
+    }
     if (*sweep) {
       auto split = [](const std::string& text) {
         std::vector<std::string> out;
