@@ -58,7 +58,8 @@ double PlateHalfSize(const Board& board) {
   for (const Marker& m : board.markers)
     for (const Vec2& c : m.corners_mm) e = std::max({e, std::abs(c.x()), std::abs(c.y())});
   // Markers' quiet zone and a margin of white paper beyond the outermost detection squares.
-  const double module = (board.markers[0].corners_mm[1] - board.markers[0].corners_mm[0]).norm() / 8;
+  const TagBitmap probe = RenderTag(board.family, board.markers[0].id);
+  const double module = (board.markers[0].corners_mm[1] - board.markers[0].corners_mm[0]).norm() / probe.width_at_border;
   return e + 3 * module;
 }
 

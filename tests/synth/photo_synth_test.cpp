@@ -83,7 +83,7 @@ TEST(PhotoSynth, MarkersAreDetectedWhereTruthSaysUpTo75Degrees) {
   const auto model = MakeIrawan2006Model("twill");
   PhotoOptions o;
   o.width = 960;
-  o.height = 720;  // 13.5 px per module at 0 deg (>= 12 needed for 75 deg)
+  o.height = 720;  // 14 px per module at 0 deg (>= 12 needed for 75 deg)
   o.pixel_samples = 3;
   const Board board = MakeBoard(o, model->tile_size_mm());
   // bonn81: 0 = 0 deg, 19 = 45 deg, 69 = 75 deg (phi 0), 80 = 75 deg.
