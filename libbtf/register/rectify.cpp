@@ -66,6 +66,7 @@ Image Rectify(const Image& photo, const PlateToPixel& project, double s, const R
                                 options.max_samples_per_axis);
       std::fill(acc.begin(), acc.end(), 0.0);
       bool inside = true;
+      const bool box = options.area_weighting && lu >= 1 && lv >= 1;
       for (int j = 0; j < nv; ++j)
         for (int i = 0; i < nu; ++i) {
           const Vec2 q(-s / 2 + (col + (i + 0.5) / nu) * texel, s / 2 - (row + (j + 0.5) / nv) * texel);
@@ -74,7 +75,14 @@ Image Rectify(const Image& photo, const PlateToPixel& project, double s, const R
             inside = false;
             continue;
           }
-          inside &= SampleBilinear(photo, px.x(), px.y(), v.data());
+          if (box) {
+            const int ix = static_cast<int>(std::lround(px.x())), iy = static_cast<int>(std::lround(px.y()));
+            inside &= ix >= 0 && iy >= 0 && ix < photo.width && iy < photo.height;
+            const int cx = std::clamp(ix, 0, photo.width - 1), cy = std::clamp(iy, 0, photo.height - 1);
+            for (int k = 0; k < ch; ++k) v[k] = photo.at(cx, cy, k);
+          } else {
+            inside &= SampleBilinear(photo, px.x(), px.y(), v.data());
+          }
           for (int k = 0; k < ch; ++k) acc[k] += v[k];
         }
       const double w = 1.0 / (nu * nv);

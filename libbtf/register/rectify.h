@@ -17,9 +17,13 @@ namespace btf {
 
 struct RectifyOptions {
   int resolution = 256;            // N: normtexture side in texels
-  double samples_per_px = 2.0;     // sample density along each texel axis, per photo pixel covered
+  double samples_per_px = 4.0;     // sample density along each texel axis, per photo pixel covered
   int max_samples_per_axis = 16;   // cap on n_u and n_v
   int min_samples_per_axis = 1;    // 1 = plain bilinear where a texel covers less than a pixel
+  // Where a texel covers >= 1 photo pixel along both axes, sample the pixels as boxes (nearest
+  // pixel per sample) instead of bilinearly: the texel then averages the pixels it overlaps,
+  // weighted by area (as INTER_AREA), without the extra 2 px tent blur of bilinear sampling.
+  bool area_weighting = true;
   void Check() const;
 };
 

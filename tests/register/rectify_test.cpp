@@ -83,6 +83,8 @@ TEST(Rectify, TexelCentresFollowTheDocumentedConvention) {
   };
   RectifyOptions o;
   o.resolution = 8;
+  o.samples_per_px = 2;
+  o.area_weighting = false;
   RectifyStats st;
   const Image t = Rectify(photo, map, 40, o, &st);
   for (int row = 0; row < 8; ++row)
@@ -93,6 +95,33 @@ TEST(Rectify, TexelCentresFollowTheDocumentedConvention) {
   EXPECT_EQ(st.invalid_fraction, 0);
   EXPECT_NEAR(st.max_footprint_px, 5, 1e-9);
   EXPECT_NEAR(st.mean_samples, 100, 1e-9);  // 5 px per texel x 2 samples per px = 10 per axis
+}
+
+TEST(Rectify, AreaWeightingAveragesExactlyThePixelsUnderTheTexel) {
+  // Texel = 4 x 4 pixels, aligned: with area weighting the texel is the plain mean of those 16
+  // pixels (to float round-off), whatever their values; bilinear sampling mixes in neighbours.
+  Image photo(32, 32, 1);
+  for (int py = 0; py < 32; ++py)
+    for (int px = 0; px < 32; ++px) photo.at(px, py, 0) = static_cast<float>((px * 7 + py * 13) % 5);
+  const PlateToPixel map = [](const Vec2& p, Vec2* px) {
+    *px = Vec2(p.x() + 15.5, 15.5 - p.y());  // 1 px per mm; plate square [-16, 16] covers the photo exactly
+    return true;
+  };
+  RectifyOptions o;
+  o.resolution = 8;
+  const Image t = Rectify(photo, map, 32, o);
+  o.area_weighting = false;
+  const Image b = Rectify(photo, map, 32, o);
+  double diff_bilinear = 0;
+  for (int row = 0; row < 8; ++row)
+    for (int col = 0; col < 8; ++col) {
+      double mean = 0;
+      for (int y = 0; y < 4; ++y)
+        for (int x = 0; x < 4; ++x) mean += photo.at(4 * col + x, 4 * row + y, 0) / 16.0;
+      EXPECT_NEAR(t.at(col, row, 0), mean, 1e-5);
+      diff_bilinear = std::max(diff_bilinear, std::abs(b.at(col, row, 0) - mean));
+    }
+  EXPECT_GT(diff_bilinear, 0.05);
 }
 
 TEST(Rectify, SamplesOutsideThePhotoAreCounted) {
