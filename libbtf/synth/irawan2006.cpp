@@ -364,7 +364,27 @@ void Irawan2006Model::EvalPrepared(const Pair& pr, const Vec2& uv, float* out) c
 }
 
 void Irawan2006Model::Eval(const Vec2& uv, const Vec3& wi, const Vec3& wo, float* out) const {
-  EvalBatch(wi, wo, &uv, 1, out);
+  // Single point: only the covering segment's ellipse is needed (no per-pair tables).
+  const double spec = SpecularFactor(wi, wo);
+  if (!(wi.allFinite() && wo.allFinite()) || wi.z() <= 0 || wo.z() <= 0) {
+    std::fill(out, out + 3, 0.0f);
+    return;
+  }
+  double u = uv.x() - std::floor(uv.x()), v = uv.y() - std::floor(uv.y());
+  if (!std::isfinite(u)) u = 0;
+  if (!std::isfinite(v)) v = 0;
+  double lx, ly;
+  const int k = Locate(u * p_.tile_w, v * p_.tile_h, &lx, &ly);
+  const auto& s = p_.segments[static_cast<std::size_t>(k)];
+  bool lit = false;
+  if (spec > 0) {
+    const Vec3 h = HalfVector(wi.normalized(), wo.normalized());
+    const Vec2 c(0.5 * s.sx * (s.kx * h.x() + 1), 0.5 * s.sy * (s.ky * h.y() + 1));
+    const Vec2 off = s.alpha * s.eta * Vec2(std::cos(s.phi), std::sin(s.phi));
+    const Vec2 p(lx, ly);
+    lit = (p - c - off).norm() + (p - c + off).norm() <= 2 * s.alpha;
+  }
+  for (int ch = 0; ch < 3; ++ch) out[ch] = static_cast<float>(p_.kd[ch] + (lit ? p_.ks[ch] * spec : 0.0));
 }
 
 void Irawan2006Model::EvalBatch(const Vec3& wi, const Vec3& wo, const Vec2* uv, int n, float* out) const {
