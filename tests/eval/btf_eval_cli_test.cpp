@@ -1,0 +1,137 @@
+// btf-eval as a user runs it: exit codes, JSON, the files a sweep writes.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <limits>
+
+#include <nlohmann/json.hpp>
+
+#include "libbtf/compress/codec.h"
+#include "libbtf/io/dataset_io.h"
+#include "tests/test_util.h"
+
+namespace btf {
+namespace {
+
+std::string Q(const std::filesystem::path& p) { return "'" + p.string() + "'"; }
+
+TEST(BtfEvalCli, CompareExitCodesAndJson) {
+  const auto dir = test::TempDir();
+  const std::string tool = test::Tool("btf-eval");
+  const Dataset ref = test::MakeTestDataset(2, 3, 4, 5);
+  Dataset t = ref;
+  for (auto& v : t.data()) v += 0.01f;
+  WriteDataset(dir / "ref.h5", ref);
+  WriteDataset(dir / "t.h5", t);
+  std::string out;
+  // rmse = 0.01 (values shifted by 0.01; float rounding below 1e-6).
+  ASSERT_EQ(test::RunCommand(tool + " compare " + Q(dir / "ref.h5") + " " + Q(dir / "t.h5") +
+                                 " --json --metric rmse --warn 0.005 --fail 0.02 2>" + Q(dir / "err.txt"),
+                             &out),
+            0);
+  const auto j = nlohmann::json::parse(out);
+  EXPECT_NEAR(j["rmse"].get<double>(), 0.01, 1e-6);
+  EXPECT_EQ(j["verdict"], "warn");
+  std::ifstream err(dir / "err.txt");
+  const std::string err_text((std::istreambuf_iterator<char>(err)), {});
+  EXPECT_NE(err_text.find("warning threshold"), std::string::npos) << err_text;
+  // Over --fail: exit 1.
+  EXPECT_EQ(test::RunCommand(tool + " compare " + Q(dir / "ref.h5") + " " + Q(dir / "t.h5") +
+                             " --metric rmse --fail 0.005 -q >/dev/null 2>&1"),
+            1);
+  // PSNR thresholds fail below: PSNR here is about 20 log10(1.6 / 0.01) = 44 dB.
+  EXPECT_EQ(test::RunCommand(tool + " compare " + Q(dir / "ref.h5") + " " + Q(dir / "t.h5") +
+                             " --metric psnr --fail 60 -q >/dev/null 2>&1"),
+            1);
+  EXPECT_EQ(test::RunCommand(tool + " compare " + Q(dir / "ref.h5") + " " + Q(dir / "t.h5") +
+                             " --metric psnr --fail 30 -q >/dev/null 2>&1"),
+            0);
+  // A NaN in the test input: exit 3 with the item named.
+  t.at(1, 2, 3, 4, 0) = std::numeric_limits<float>::quiet_NaN();
+  WriteDataset(dir / "nan.h5", t);
+  EXPECT_EQ(test::RunCommand(tool + " compare " + Q(dir / "ref.h5") + " " + Q(dir / "nan.h5") + " 2>&1", &out), 3);
+  EXPECT_NE(out.find("view 1 light 2 texel (y 3, x 4) channel 0 is NaN"), std::string::npos) << out;
+  // Incompatible shapes: exit 3.
+  WriteDataset(dir / "small.h5", test::MakeTestDataset(2, 3, 4, 4));
+  EXPECT_EQ(test::RunCommand(tool + " compare " + Q(dir / "ref.h5") + " " + Q(dir / "small.h5") + " 2>&1", &out), 3);
+  EXPECT_NE(out.find("shapes must match"), std::string::npos) << out;
+  // Usage errors: exit 2; a missing file: exit 4.
+  EXPECT_EQ(test::RunCommand(tool + " compare " + Q(dir / "ref.h5") + " 2>/dev/null"), 2);
+  EXPECT_EQ(test::RunCommand(tool + " compare " + Q(dir / "ref.h5") + " " + Q(dir / "t.h5") + " --metric foo 2>/dev/null"), 2);
+  EXPECT_EQ(test::RunCommand(tool + " compare " + Q(dir / "ref.h5") + " " + Q(dir / "none.h5") + " 2>/dev/null"), 4);
+}
+
+TEST(BtfEvalCli, CompareReadsCodecs) {
+  const auto dir = test::TempDir();
+  const Dataset ref = test::MakeTestDataset(2, 4, 6, 6);
+  CompressOptions co;
+  co.method = CodecMethod::kPcaView;
+  co.components = 1;
+  const Codec codec = Compress(ref, co);
+  WriteDataset(dir / "ref.h5", ref);
+  WriteCodec(dir / "c.h5", codec);
+  // The same figure as decoding in memory and comparing (both sides use the codec's decoder).
+  const Dataset decoded = codec.DecodeAll();
+  double sse = 0;
+  for (std::size_t i = 0; i < ref.size(); ++i) sse += std::pow(double(decoded.data()[i]) - ref.data()[i], 2);
+  std::string out;
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-eval") + " compare " + Q(dir / "ref.h5") + " " + Q(dir / "c.h5") +
+                                 " --json --error-maps " + Q(dir / "maps") + " --maps 2",
+                             &out),
+            0);
+  const auto j = nlohmann::json::parse(out);
+  EXPECT_NEAR(j["rmse"].get<double>(), std::sqrt(sse / double(ref.size())), 1e-9);
+  ASSERT_EQ(j["error_maps"].size(), 2u);
+  for (const auto& f : j["error_maps"]) EXPECT_TRUE(std::filesystem::exists(f.get<std::string>()));
+}
+
+TEST(BtfEvalCli, SweepWritesResultsPlotsAndReport) {
+  const auto dir = test::TempDir();
+  // 3 views x 4 lights x 8x8 texels: 2 methods, a handful of settings, one timing run.
+  WriteDataset(dir / "d.h5", test::MakeTestDataset(3, 4, 8, 8));
+  std::string out;
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-eval") + " sweep " + Q(dir / "d.h5") + " -o " + Q(dir / "sweep") +
+                                 " --components 1,2 --clusters 2,4 --runs 1 --render-size 40 --json -q",
+                             &out),
+            0);
+  const auto j = nlohmann::json::parse(out);
+  ASSERT_EQ(j["points"].size(), 2u + 2u * 2u);  // pca-view: 2 settings, lpca: 2 x 2
+  for (const auto& p : j["points"]) {
+    EXPECT_GT(p["bytes"].get<double>(), 0);
+    EXPECT_GT(p["compress_s"].get<double>(), 0);
+    EXPECT_GT(p["decode_s"].get<double>(), 0);
+    EXPECT_GE(p["errors"]["rmse"].get<double>(), 0);
+    EXPECT_TRUE(std::filesystem::exists(p["codec_file"].get<std::string>()));
+  }
+  // More components never increase the error of pca-view (nested PCA subspaces).
+  EXPECT_LE(j["points"][1]["errors"]["rmse"].get<double>(), j["points"][0]["errors"]["rmse"].get<double>() + 1e-9);
+  // At least one point is on each Pareto front.
+  for (const char* front : {"bytes", "compress_time", "decode_time"}) {
+    int n = 0;
+    for (const auto& p : j["points"]) n += p["pareto"][front].get<bool>();
+    EXPECT_GE(n, 1) << front;
+  }
+  for (const char* f : {"results.json", "report.html", "error_vs_bytes.png", "error_vs_bytes.svg",
+                        "error_vs_compress_time.png", "error_vs_decode_time.svg"})
+    EXPECT_TRUE(std::filesystem::exists(dir / "sweep" / f)) << f;
+  EXPECT_EQ(j["renders"].size(), 4u);  // 2 methods x (patch + point, cylinder + environment)
+  // The report is self-contained: images are data URIs, nothing refers to other files.
+  std::ifstream in(dir / "sweep" / "report.html");
+  const std::string html((std::istreambuf_iterator<char>(in)), {});
+  EXPECT_NE(html.find("data:image/svg+xml;base64,"), std::string::npos);
+  EXPECT_NE(html.find("data:image/png;base64,"), std::string::npos);
+  EXPECT_EQ(html.find("src=\"error_"), std::string::npos);
+  EXPECT_EQ(html.find("src=\"render_"), std::string::npos);
+}
+
+TEST(BtfEvalCli, StabilityJson) {
+  std::string out;
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-eval") + " stability --only input/ directions/ --json -q", &out), 0);
+  const auto j = nlohmann::json::parse(out);
+  EXPECT_EQ(j["failed"], 0);
+  EXPECT_EQ(j["passed"], 3);
+}
+
+}  // namespace
+}  // namespace btf
