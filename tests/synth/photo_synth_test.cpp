@@ -123,6 +123,45 @@ TEST(PhotoSynth, MarkersAreDetectedWhereTruthSaysUpTo75Degrees) {
   }
 }
 
+TEST(PhotoSynth, TruthCornersHoldWithDistortionAndRaisedMarkers) {
+  // truth.json's corners come from the projection model (marker plane z = h, then distortion);
+  // the picture comes from ray casting (inverse distortion, ray-plane hits). Detection in the
+  // written PNG must land on the truth corners: the same bounds as above.
+  const auto model = MakeIrawan2006Model("twill");
+  PhotoOptions o;
+  o.view_indices = {19};
+  o.light_indices = {0};
+  o.width = 960;
+  o.height = 720;
+  o.k1 = -0.08;
+  o.k2 = 0.02;
+  o.marker_height_mm = 1.5;
+  const auto dir = test::TempDir();
+  SynthesizePhotos(*model, o, dir, {});
+  const auto truth = ReadTruth(dir / "truth.json");
+  const Image img = ReadImage(dir / truth[0].file);
+  const auto dets = Detect(img);
+  ASSERT_EQ(dets.size(), 8u);
+  ASSERT_EQ(truth[0].marker_corners_px.size(), 8u);
+  Vec2 mean_offset = Vec2::Zero();
+  double worst = 0;
+  for (const Detection& d : dets) {
+    const auto& t = truth[0].marker_corners_px.at(d.id);
+    for (int k = 0; k < 4; ++k) {
+      mean_offset += (d.corners[k] - t[k]) / 32.0;
+      worst = std::max(worst, (d.corners[k] - t[k]).norm());
+    }
+  }
+  EXPECT_LT(mean_offset.norm(), 0.2);
+  EXPECT_LT(worst, 0.7);
+  // And the effects are real: ignoring the height or the distortion moves corners by > 1 px.
+  const Board board = ReadBoard(dir / "board.json");
+  const CameraPose cam = MakeCamera(o, board, o.views[19]);
+  Vec2 flat;
+  ASSERT_TRUE(cam.Project(Vec3(board.markers[0].corners_mm[0].x(), board.markers[0].corners_mm[0].y(), 0), &flat));
+  EXPECT_GT((flat - truth[0].marker_corners_px.at(0)[0]).norm(), 1.0);
+}
+
 // Averages photo values over each texel footprint of the sample region (K x K points per texel
 // mapped through the homography, bilinear in the photo): a minimal rectifier for the test.
 std::vector<double> Rectify(const Image& img, const Eigen::Matrix3d& H, double sample_mm, int N, int K) {
