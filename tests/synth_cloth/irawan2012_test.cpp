@@ -250,7 +250,9 @@ TEST(Irawan2012Model, MatchesIndependentTranscriptionOfTheReference) {
       nonzero += ref > 0;
     }
     // Except the all-disabled velvet, a real share of random queries lands in a highlight band.
-    if (name != "velvet") EXPECT_GT(nonzero, 30);
+    if (name != "velvet") {
+      EXPECT_GT(nonzero, 30);
+    }
   }
 }
 

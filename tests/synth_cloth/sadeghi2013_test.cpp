@@ -223,7 +223,9 @@ TEST(Sadeghi2013Model, DirectionalAlbedoIsBounded) {
           }
         for (int c = 0; c < 3; ++c) {
           EXPECT_LT(rho[c], 1.0) << "theta_i " << ti << " phi_i " << pi << " channel " << c;
-          if (name != "velvet" || c < 2) EXPECT_GT(rho[c], 1e-4) << "theta_i " << ti << " channel " << c;
+          if (name != "velvet" || c < 2) {
+            EXPECT_GT(rho[c], 1e-4) << "theta_i " << ti << " channel " << c;
+          }
         }
       }
   }

@@ -100,10 +100,12 @@ void ExpectSame(const WeavePattern& a, const WeavePattern& b) {
       EXPECT_DOUBLE_EQ(p.kd[c], q.kd[c]);
       EXPECT_DOUBLE_EQ(p.ks[c], q.ks[c]);
     }
-    EXPECT_EQ(std::isnan(p.alpha), std::isnan(q.alpha));
-    if (!std::isnan(p.alpha)) EXPECT_DOUBLE_EQ(p.alpha, q.alpha);
-    if (!std::isnan(p.beta)) EXPECT_DOUBLE_EQ(p.beta, q.beta);
-    if (!std::isnan(p.ss)) EXPECT_DOUBLE_EQ(p.ss, q.ss);
+    for (auto [x, y] : {std::pair{p.alpha, q.alpha}, {p.beta, q.beta}, {p.ss, q.ss}}) {
+      EXPECT_EQ(std::isnan(x), std::isnan(y));
+      if (!std::isnan(x)) {
+        EXPECT_DOUBLE_EQ(x, y);
+      }
+    }
   }
 }
 
