@@ -37,7 +37,7 @@ struct RenderOptions {
   // "sky" (gradient + sun lobe), "studio" (key + fill lobes) or "uniform" (radiance 1 everywhere:
   // the white-furnace test, where a Lambertian BTF of albedo rho renders as rho).
   std::string environment = "sky";
-  int width = 200, height = 160;    // pixels
+  int width = 280, height = 224;    // pixels
   double tiles = 3;                 // texture repeats along each side of the patch / along the cylinder
   // Point light position (world: z up, camera at (0, -3.2, 2.6) looking at the origin) and its
   // radiant intensity; the default gives irradiance about 1 at normal incidence at the centre.

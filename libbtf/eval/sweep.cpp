@@ -139,7 +139,7 @@ std::string ReportHtml(const SweepSummary& s, const SweepOptions& o, const std::
   h += "<style>body{font-family:sans-serif;margin:24px;max-width:1500px;color:#222}"
        "table{border-collapse:collapse;font-size:13px}td,th{border:1px solid #bbb;padding:3px 7px;text-align:right}"
        "th{background:#eee}td.l{text-align:left}tr.front td{background:#fff6d5}"
-       ".plots img{border:1px solid #ccc;margin:4px;max-width:100%}.renders img{margin:6px 0;max-width:100%}"
+       ".plots{display:flex;flex-wrap:wrap;gap:8px}.plots img{border:1px solid #ccc;width:calc(50% - 10px);min-width:480px}.renders img{margin:6px 0;max-width:100%}"
        "code{background:#f3f3f3;padding:1px 4px}</style></head><body>\n";
   h += "<h1>Codec sweep: error against size and run time</h1>\n";
   h += fmt::format(

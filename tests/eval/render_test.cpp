@@ -49,7 +49,8 @@ TEST(EvalRender, PointLightOnLambertianMatchesTheClosedForm) {
 TEST(EvalRender, WhiteFurnace) {
   // Uniform environment of radiance 1: a Lambertian surface of albedo rho reflects rho, for every
   // normal. The 256 fixed directions integrate cos over the hemisphere with a quadrature error
-  // that we bound at 2 % (measured: below 1 %).
+  // that we bound at 1 % (measured: 0 for the patch, where the Fibonacci set's equally spaced z
+  // make a midpoint rule that is exact for cos = z; 0.11 % on the cylinder's tilted normals).
   const Dataset d = Lambertian(0.8);
   const auto btf = DatasetEvaluator(d);
   for (const char* scene : {"patch", "cylinder"}) {
@@ -62,7 +63,7 @@ TEST(EvalRender, WhiteFurnace) {
     const Image img = Render(*btf, o);
     for (int y = 0; y < o.height; ++y)
       for (int x = 0; x < o.width; ++x)
-        if (TracePixel(o, x, y).hit) ASSERT_NEAR(img.at(x, y, 0), 0.8, 0.02 * 0.8) << scene << " " << x << "," << y;
+        if (TracePixel(o, x, y).hit) ASSERT_NEAR(img.at(x, y, 0), 0.8, 0.01 * 0.8) << scene << " " << x << "," << y;
   }
 }
 
