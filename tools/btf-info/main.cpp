@@ -1,6 +1,7 @@
 // btf-info FILE: summary of a libbtf dataset or codec file (docs/btf-info.md).
 #include <fmt/format.h>
 
+#include "libbtf/compress/codec.h"
 #include "libbtf/io/dataset_stats.h"
 #include "libbtf/io/file_kind.h"
 #include "tools/common/cli.h"
@@ -36,7 +37,10 @@ int main(int argc, char** argv) {
     nlohmann::json j;
     if (format == btf::kDatasetFormat)
       j = btf::DescribeDatasetFile(path, !no_stats, reporter);
-    else
+    else if (format == btf::kCodecFormat) {
+      j = btf::ReadCodec(path).Describe();  // method, shape, samplings, components, sizes, transform
+      j["path"] = path;
+    } else
       throw btf::Error(btf::ExitCode::kBadInput,
                        fmt::format("'{}' holds format '{}', which this build of libbtf does not know", path, format));
     if (common.json)

@@ -1,0 +1,298 @@
+// btf-compress benchmarks (docs/btf-compress.md "Performance"): compression time per method,
+// decode throughput, the dominant kernel's rate as a fraction of Eigen GEMM measured in the same
+// run, and ratios against straightforward implementations (full SVD per slot; plain Lloyd
+// k-means then full-SVD PCA per cluster).
+//
+// Size: 81 x 81 directions, RGB, BTF_BENCH_RES x BTF_BENCH_RES texels (default 64; 256 is the
+// Bonn size, 5 GB in float32, needs about 12 GB of memory). The data is synthetic: per view slot
+// rank 12 in light plus 1 % noise, and 8 texel materials, so both codecs have structure to find.
+#include <benchmark/benchmark.h>
+
+#include <Eigen/Core>
+#include <Eigen/SVD>
+#include <cmath>
+#include <cstdlib>
+#include <limits>
+#include <memory>
+#include <random>
+
+#include "libbtf/compress/codec.h"
+#include "libbtf/compress/pca.h"
+
+namespace {
+
+using btf::RowMatrixXf;
+
+int Resolution() {
+  const char* e = std::getenv("BTF_BENCH_RES");
+  return e ? std::max(4, std::atoi(e)) : 64;
+}
+
+// Deterministic cheap noise in [-1, 1).
+inline float Hash(std::uint64_t x) {
+  x += 0x9E3779B97F4A7C15ull;
+  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
+  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
+  x ^= x >> 31;
+  return float(double(x >> 11) * 0x1.0p-53 * 2 - 1);
+}
+
+const btf::Dataset& Data() {
+  static std::unique_ptr<btf::Dataset> d;
+  if (d) return *d;
+  const int n = Resolution();
+  const btf::Sampling s = btf::Sampling::Bonn81();
+  d = std::make_unique<btf::Dataset>(s, s, n, n, 3);
+  const int L = 81, rank = 12, materials = 8;
+  const std::size_t T = std::size_t(n) * n;
+#pragma omp parallel for schedule(dynamic)
+  for (int v = 0; v < 81; ++v) {
+    for (int l = 0; l < L; ++l) {
+      float* img = d->image(v, l).data();
+      float a[rank];
+      for (int r = 0; r < rank; ++r)
+        a[r] = std::cos(float(r + 1) * float(s[l].x() + 0.5 * s[l].y()) + 0.1f * v) / float(r + 1);
+      for (std::size_t t = 0; t < T; ++t) {
+        const int m = int((t * 2654435761u) >> 7) % materials;
+        for (int c = 0; c < 3; ++c) {
+          float x = 1.0f + 0.2f * m + 0.1f * c;
+          for (int r = 0; r < rank; ++r) x += 0.2f * a[r] * Hash((std::uint64_t(v) * 64 + r) * 1315423911u + m * 7 + c) *
+                                               (1 + 0.3f * Hash(t * 977 + r));
+          img[t * 3 + c] = x * (1 + 0.01f * Hash((std::uint64_t(v) * L + l) * T * 3 + t * 3 + c));
+        }
+      }
+    }
+  }
+  return *d;
+}
+
+void SetSizeCounters(benchmark::State& st) {
+  const auto& d = Data();
+  st.counters["texels"] = double(d.num_texels());
+  st.counters["GB_float32"] = double(d.size()) * 4 / 1e9;
+}
+
+// Measured Eigen GEMM rate (float and double, 1024^3), the yardstick for kernel efficiency.
+double& GemmRate(bool dbl) {
+  static double rate[2] = {0, 0};
+  return rate[dbl];
+}
+
+template <typename Scalar>
+void BM_EigenGemm(benchmark::State& st) {
+  using M = Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic>;
+  const int n = 1024;
+  M a = M::Random(n, n), b = M::Random(n, n), c(n, n);
+  double secs = 0;
+  int reps = 0;
+  for (auto _ : st) {
+    const auto t0 = std::chrono::steady_clock::now();
+    c.noalias() = a * b;
+    benchmark::DoNotOptimize(c.data());
+    secs += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    ++reps;
+  }
+  const double gflops = 2.0 * n * n * n * reps / secs / 1e9;
+  GemmRate(sizeof(Scalar) == 8) = gflops;
+  st.counters["GFLOPs"] = gflops;
+}
+BENCHMARK_TEMPLATE(BM_EigenGemm, float)->Unit(benchmark::kMillisecond)->MinTime(2.0);
+BENCHMARK_TEMPLATE(BM_EigenGemm, double)->Unit(benchmark::kMillisecond)->MinTime(2.0);
+
+std::unique_ptr<btf::Codec>& PcaCodec() {
+  static std::unique_ptr<btf::Codec> c;
+  return c;
+}
+std::unique_ptr<btf::Codec>& LpcaCodec() {
+  static std::unique_ptr<btf::Codec> c;
+  return c;
+}
+double g_pca_view_seconds_per_slot = 0;
+
+void BM_PcaView(benchmark::State& st) {
+  const auto& d = Data();
+  btf::CompressOptions o;
+  o.components = 16;
+  btf::CompressSummary s;
+  for (auto _ : st) PcaCodec() = std::make_unique<btf::Codec>(btf::Compress(d, o, {}, &s));
+  SetSizeCounters(st);
+  double decompose = 0;
+  for (const auto& [name, sec] : s.times.phases())
+    if (name == "decompose") decompose = sec;
+  // Dominant kernels per slot: Gram (double, L^2 D multiply-adds) + basis and scores (float, 2 x 2 L c D).
+  const double L = 81, D = double(d.image_size()), c = 16;
+  const double flops = 81 * (2 * L * L * D / 2 + 4 * L * c * D);
+  st.counters["decompose_s"] = decompose;
+  st.counters["kernel_GFLOPs"] = flops / decompose / 1e9;
+  if (GemmRate(true) > 0) st.counters["fraction_of_double_gemm"] = flops / decompose / 1e9 / GemmRate(true);
+  st.counters["relative_error"] = s.relative_error;
+  st.counters["ratio_vs_float32"] = s.ratio_float32;
+  g_pca_view_seconds_per_slot = s.times.Total() / 81;
+  st.counters["seconds_per_slot"] = g_pca_view_seconds_per_slot;
+}
+BENCHMARK(BM_PcaView)->Unit(benchmark::kSecond)->Iterations(1);
+
+// Straightforward reference: full SVD (BDCSVD) of every centred slot, first 16 components. Run on
+// the first `slots` view slots only (it is slow); the ratio is per slot.
+void BM_PcaViewFullSvdReference(benchmark::State& st) {
+  const auto& d = Data();
+  const int slots = static_cast<int>(st.range(0));
+  double err = 0;
+  for (auto _ : st) {
+    for (int v = 0; v < slots; ++v) {
+      const auto s = d.view_slot(v);
+      const Eigen::Map<const RowMatrixXf> X(s.data(), 81, static_cast<Eigen::Index>(d.image_size()));
+      const btf::PcaResult r = btf::PcaFullSvd(X, 16);
+      err += r.residual_energy;
+    }
+  }
+  benchmark::DoNotOptimize(err);
+  st.counters["slots"] = slots;
+  st.counters["seconds_per_slot"] = benchmark::Counter(double(slots), benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+  if (g_pca_view_seconds_per_slot > 0)
+    st.counters["reference_slot_s_over_pca_view_slot_s"] =
+        benchmark::Counter(double(slots) * g_pca_view_seconds_per_slot, benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+}
+BENCHMARK(BM_PcaViewFullSvdReference)->Arg(4)->Unit(benchmark::kSecond)->Iterations(1);
+
+double g_lpca_seconds = 0;
+
+void BM_Lpca(benchmark::State& st) {
+  const auto& d = Data();
+  btf::CompressOptions o;
+  o.method = btf::CodecMethod::kLpca;
+  o.clusters = 32;
+  o.components = 8;
+  o.max_iterations = static_cast<int>(st.range(0));
+  btf::CompressSummary s;
+  for (auto _ : st) LpcaCodec() = std::make_unique<btf::Codec>(btf::Compress(d, o, {}, &s));
+  SetSizeCounters(st);
+  for (const auto& [name, sec] : s.times.phases()) st.counters[name + "_s"] = sec;
+  st.counters["rounds"] = double(s.iteration_errors.size());
+  st.counters["relative_error"] = s.relative_error;
+  st.counters["ratio_vs_float32"] = s.ratio_float32;
+  // Reassignment GEMM: N x d x K (c + 1) multiply-adds per round; its share is reported by the
+  // kernel benchmark below.
+  g_lpca_seconds = s.times.Total();
+}
+BENCHMARK(BM_Lpca)->Arg(20)->Unit(benchmark::kSecond)->Iterations(1);
+
+// The LPCA reassignment kernel alone (one texel block against all clusters), as a GEMM rate.
+void BM_LpcaReassignKernel(benchmark::State& st) {
+  const auto& d = Data();
+  const Eigen::Index n = std::min<Eigen::Index>(4096, static_cast<Eigen::Index>(d.num_texels()));
+  const Eigen::Index dim = static_cast<Eigen::Index>(d.abrdf_size()), cols = 32 * 9;
+  RowMatrixXf A = RowMatrixXf::Random(n, dim), B = RowMatrixXf::Random(cols, dim);
+  Eigen::MatrixXf P(n, cols);
+  double secs = 0;
+  int reps = 0;
+  for (auto _ : st) {
+    const auto t0 = std::chrono::steady_clock::now();
+    P.noalias() = A * B.transpose();
+    benchmark::DoNotOptimize(P.data());
+    secs += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    ++reps;
+  }
+  const double g = 2.0 * n * dim * cols * reps / secs / 1e9;
+  st.counters["GFLOPs"] = g;
+  if (GemmRate(false) > 0) st.counters["fraction_of_float_gemm"] = g / GemmRate(false);
+}
+BENCHMARK(BM_LpcaReassignKernel)->Unit(benchmark::kMillisecond)->MinTime(1.0);
+
+// Straightforward reference: plain Lloyd k-means on the ABRDFs (explicit distance loops, random
+// initial centres, at most 10 rounds) then a full SVD per cluster (8 components).
+void BM_LpcaLloydReference(benchmark::State& st) {
+  const auto& d = Data();
+  const std::size_t N = d.num_texels(), dim = d.abrdf_size();
+  const int K = 32, C = 8;
+  RowMatrixXf A(static_cast<Eigen::Index>(N), static_cast<Eigen::Index>(dim));
+  for (int y = 0; y < d.height(); ++y)
+    for (int x = 0; x < d.width(); ++x) {
+      const auto a = d.Abrdf(y, x);
+      A.row(Eigen::Index(y) * d.width() + x) = Eigen::Map<const Eigen::RowVectorXf>(a.data(), static_cast<Eigen::Index>(dim));
+    }
+  double residual = 0, energy = A.cast<double>().squaredNorm();
+  int rounds = 0;
+  for (auto _ : st) {
+    std::mt19937_64 rng(1);
+    RowMatrixXf centres(K, static_cast<Eigen::Index>(dim));
+    for (int k = 0; k < K; ++k) centres.row(k) = A.row(static_cast<Eigen::Index>(rng() % N));
+    std::vector<int> assign(N, -1);
+    for (rounds = 0; rounds < 10; ++rounds) {
+      bool changed = false;
+#pragma omp parallel for reduction(|| : changed)
+      for (std::ptrdiff_t i = 0; i < std::ptrdiff_t(N); ++i) {
+        float best = std::numeric_limits<float>::max();
+        int arg = 0;
+        for (int k = 0; k < K; ++k) {
+          float s = 0;
+          for (std::size_t j = 0; j < dim; ++j) {
+            const float e = A(i, Eigen::Index(j)) - centres(k, Eigen::Index(j));
+            s += e * e;
+          }
+          if (s < best) best = s, arg = k;
+        }
+        if (assign[i] != arg) changed = true, assign[i] = arg;
+      }
+      centres.setZero();
+      std::vector<int> count(K, 0);
+      for (std::size_t i = 0; i < N; ++i) centres.row(assign[i]) += A.row(Eigen::Index(i)), ++count[assign[i]];
+      for (int k = 0; k < K; ++k)
+        if (count[k]) centres.row(k) /= float(count[k]);
+      if (!changed) break;
+    }
+    residual = 0;
+    for (int k = 0; k < K; ++k) {
+      std::vector<Eigen::Index> m;
+      for (std::size_t i = 0; i < N; ++i)
+        if (assign[i] == k) m.push_back(Eigen::Index(i));
+      if (m.empty()) continue;
+      RowMatrixXf X(static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(dim));
+      for (std::size_t i = 0; i < m.size(); ++i) X.row(Eigen::Index(i)) = A.row(m[i]);
+      residual += btf::PcaFullSvd(X, C).residual_energy;
+    }
+  }
+  st.counters["rounds"] = rounds;
+  st.counters["relative_error"] = std::sqrt(residual / energy);
+  if (g_lpca_seconds > 0)
+    st.counters["reference_s_over_lpca_s"] =
+        benchmark::Counter(g_lpca_seconds, benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+}
+BENCHMARK(BM_LpcaLloydReference)->Unit(benchmark::kSecond)->Iterations(1);
+
+void BM_DecodeViewSlot(benchmark::State& st) {
+  const btf::Codec& c = st.range(0) == 0 ? *PcaCodec() : *LpcaCodec();
+  std::vector<float> out(c.image_size() * c.num_lights());
+  int v = 0;
+  for (auto _ : st) {
+    c.DecodeViewSlot(v, out.data());
+    v = (v + 1) % c.num_views();
+    benchmark::DoNotOptimize(out.data());
+  }
+  st.SetLabel(st.range(0) == 0 ? "pca-view" : "lpca");
+  // One slot = L images = L x H x W texel values.
+  st.counters["images_per_s"] = benchmark::Counter(double(st.iterations()) * c.num_lights(), benchmark::Counter::kIsRate);
+  st.counters["texels_per_s"] = benchmark::Counter(double(st.iterations()) * c.num_lights() * c.height() * c.width(),
+                                                   benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_DecodeViewSlot)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->MinTime(1.0);
+
+void BM_DecodeValue(benchmark::State& st) {
+  const btf::Codec& c = st.range(0) == 0 ? *PcaCodec() : *LpcaCodec();
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> u(0, 1);
+  float out[3];
+  for (auto _ : st) {
+    const btf::Vec3 wi = btf::HemisphereFromSquare(btf::Vec2(u(rng), u(rng)));
+    const btf::Vec3 wo = btf::HemisphereFromSquare(btf::Vec2(u(rng), u(rng)));
+    c.Value(btf::Vec2(u(rng), u(rng)), wi, wo, out);
+    benchmark::DoNotOptimize(out);
+  }
+  st.SetLabel(st.range(0) == 0 ? "pca-view" : "lpca");
+  st.counters["values_per_s"] = benchmark::Counter(double(st.iterations()), benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_DecodeValue)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond)->MinTime(1.0);
+
+}  // namespace
+
+BENCHMARK_MAIN();
