@@ -150,7 +150,8 @@ std::string ReportHtml(const SweepSummary& s, const SweepOptions& o, const std::
       o.runs, s.error_metric == "rel" ? "relative L2 error ||decoded - truth|| / ||truth||" : "RMSE",
       s.psnr_peak);
   if (!o.command_line.empty()) h += "<p>Made by <code>" + Html(o.command_line) + "</code></p>\n";
-  h += "<h2>Plots</h2>\n<p>Lines join the settings of one method (and cluster count); black rings and the black line "
+  h += "<h2>Plots</h2>\n<p>On the size plot, lines join the settings of one method (and cluster count) in order of c; black rings "
+       "and the black line "
        "mark the Pareto front (no other setting is both cheaper and more accurate). Both axes are logarithmic.</p>\n"
        "<div class=\"plots\">\n";
   for (const auto& name : plot_names)
@@ -167,10 +168,10 @@ std::string ReportHtml(const SweepSummary& s, const SweepOptions& o, const std::
     const std::string marks = std::string(p.pareto_bytes ? "B" : "") + (p.pareto_compress ? "C" : "") +
                               (p.pareto_decode ? "D" : "");
     h += fmt::format(
-        "<tr{}><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}/{}</td><td>{}</td><td>{:.1f}</td><td>{:.4g}</td>"
+        "<tr{}><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}{}</td><td>{}</td><td>{:.1f}</td><td>{:.4g}</td>"
         "<td>{:.4g}</td><td>{:.4g}</td><td>{}</td><td>{}</td><td>{}</td><td>{:.4g}</td><td>{}</td></tr>\n",
         any ? " class=\"front\"" : "", p.method, p.clusters ? std::to_string(p.clusters) : "-", p.components,
-        p.stored_clusters ? std::to_string(p.stored_clusters) : "-", p.stored_components, p.bytes, p.ratio_float32,
+        p.stored_clusters ? std::to_string(p.stored_clusters) + "/" : "", p.stored_components, p.bytes, p.ratio_float32,
         p.compress_s, p.decode_s, p.rmse, p.rel_l2 ? fmt::format("{:.4g}", *p.rel_l2) : "-",
         p.psnr_db ? fmt::format("{:.2f}", *p.psnr_db) : "inf", p.mean_ssim ? fmt::format("{:.4f}", *p.mean_ssim) : "-",
         p.max_abs, any ? "&#9733; " + marks : "");
