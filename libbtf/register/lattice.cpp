@@ -182,6 +182,10 @@ void LatticeOptions::Check() const {
   BTF_CHECK_OPTION(noise_factor >= 1, "noise_factor", ">= 1");
   BTF_CHECK_OPTION(max_yarns_per_repeat >= 1 && max_yarns_per_repeat <= 16, "max_yarns_per_repeat", "1..16");
   BTF_CHECK_OPTION(match_tolerance_bins > 0 && match_tolerance_bins < 0.5, "match_tolerance_bins", "0 < value < 0.5");
+  BTF_CHECK_OPTION(subharmonic_fraction >= peak_fraction && subharmonic_fraction < 1, "subharmonic_fraction",
+                   "peak_fraction <= value < 1");
+  BTF_CHECK_OPTION(subharmonic_tolerance_bins > 0 && subharmonic_tolerance_bins <= match_tolerance_bins,
+                   "subharmonic_tolerance_bins", "0 < value <= match_tolerance_bins");
 }
 
 nlohmann::json Lattice::ToJson() const {
@@ -194,7 +198,14 @@ nlohmann::json Lattice::ToJson() const {
           {"yarn_cells_per_repeat", yarn_cells_per_repeat},
           {"peaks_found", peaks_found},
           {"peaks_used", peaks_used},
-          {"fit_rms_bins", fit_rms_bins}};
+          {"fit_rms_bins", fit_rms_bins},
+          {"aliases_skipped", aliases_skipped},
+          {"strongest_peaks", [&] {
+             nlohmann::json j = nlohmann::json::array();
+             for (std::size_t i = 0; i < peaks.size() && i < 12; ++i)
+               j.push_back({{"f_cycles_per_texel", v(peaks[i].first)}, {"magnitude", peaks[i].second}});
+             return j;
+           }()}};
 }
 
 Lattice EstimateLattice(const std::vector<float>& grey, int w, int h, const LatticeOptions& o) {
@@ -225,15 +236,37 @@ Lattice EstimateLattice(const std::vector<float>& grey, int w, int h, const Latt
   K << k1, k2;
   const double strong_area = std::abs(K.determinant());
 
+  Lattice L;
   // Coarsest reciprocal lattice generating every significant peak: express each peak in the
   // strongest-peak basis as n/d with the smallest d <= max_yarns_per_repeat.
   int D = 1;
   std::vector<std::pair<Eigen::Vector2i, int>> fracs;
+  auto on_lattice = [&](const Vec2& f) {
+    const Vec2 c = K.inverse() * f;
+    return (K * Vec2(c.array().round()) - f).norm() * bins < o.match_tolerance_bins;
+  };
   for (const auto& p : peaks) {
     const Vec2 c = K.inverse() * p.f;
+    // A peak that is an aliased harmonic of the strong lattice (shifted by one sampling frequency:
+    // the texel box prefilter lets harmonics above Nyquist fold back) is no evidence of a longer
+    // repeat: skip it here.
+    bool alias = false;
+    if (!on_lattice(p.f))
+      for (int sy = -1; sy <= 1 && !alias; ++sy)
+        for (int sx = -1; sx <= 1 && !alias; ++sx)
+          if ((sx || sy) && on_lattice(p.f + Vec2(sx, sy))) alias = true;
+    if (alias) {
+      ++L.aliases_skipped;
+      continue;
+    }
     for (int d = 1; d <= o.max_yarns_per_repeat; ++d) {
       const Vec2 nd = (d * c).array().round();
-      if ((K * nd / d - p.f).norm() * bins < o.match_tolerance_bins) {
+      const double res = (K * nd / d - p.f).norm() * bins;
+      // A longer repeat (d > 1) needs a clear sub-harmonic: strong enough and on the finer lattice
+      // as precisely as the DTFT-refined harmonics are (weak moire peaks land near n/d by chance).
+      if (d > 1 && (p.magnitude < o.subharmonic_fraction * peaks[0].magnitude || res > o.subharmonic_tolerance_bins))
+        continue;
+      if (res < o.match_tolerance_bins) {
         const int lcm = std::lcm(D, d);
         if (lcm <= o.max_yarns_per_repeat) {
           D = lcm;
@@ -253,8 +286,8 @@ Lattice EstimateLattice(const std::vector<float>& grey, int w, int h, const Latt
   R << r1, r2;
 
   // Harmonic fit: R minimising sum w |R m_i - p_i|^2 over all peaks near lattice nodes m_i.
-  Lattice L;
   L.peaks_found = static_cast<int>(peaks.size());
+  for (const auto& p : peaks) L.peaks.emplace_back(p.f, p.magnitude);
   for (int pass = 0; pass < 3; ++pass) {
     Eigen::Matrix2d A = Eigen::Matrix2d::Zero(), B = Eigen::Matrix2d::Zero();
     int used = 0;

@@ -20,6 +20,8 @@ struct LatticeOptions {
   double noise_factor = 8;        // ... and >= this x the median magnitude of the spectrum
   int max_yarns_per_repeat = 8;   // largest sub-harmonic denominator searched (satins repeat over up to 8 yarns)
   double match_tolerance_bins = 0.35;  // a peak belongs to a lattice if within this many bins of a node
+  double subharmonic_fraction = 0.05;       // a sub-harmonic (longer repeat) needs this x the strongest peak ...
+  double subharmonic_tolerance_bins = 0.1;  // ... and must sit this close to its n/d position
   void Check() const;
 };
 
@@ -31,14 +33,17 @@ struct Lattice {
   // 3 for a 3-yarn twill whose strongest peak is the yarn spacing).
   int yarn_cells_per_repeat = 1;
   int peaks_found = 0, peaks_used = 0;
+  int aliases_skipped = 0;  // peaks explained as harmonics folded back by texel sampling
   double fit_rms_bins = 0;  // RMS distance of the used peaks from the fitted reciprocal lattice
+  std::vector<std::pair<Vec2, double>> peaks;  // significant peaks (cycles/texel, magnitude), strongest first
   nlohmann::json ToJson() const;
 };
 
 // Estimates the lattice of a periodic grey image (row-major width x height): Hann-windowed DFT,
 // peaks refined to the maximum of the windowed DTFT (no bin-grid bias), the coarsest reciprocal lattice generating every
 // significant peak (the smallest repeat consistent with all peaks, so twill/satin sub-harmonics
-// are honoured), then a magnitude-weighted least-squares fit of the basis to all harmonics.
+// are honoured; peaks that are aliases of the strong lattice's harmonics are skipped), then a
+// magnitude-weighted least-squares fit of the basis to all harmonics.
 // Throws btf::Error (bad input) if no two non-collinear periods are found.
 Lattice EstimateLattice(const std::vector<float>& grey, int width, int height, const LatticeOptions& options = {});
 
