@@ -8,6 +8,8 @@
 #include <numeric>
 #include <random>
 
+#include <omp.h>
+
 #include "libbtf/compress/codec.h"
 #include "libbtf/compress/pca.h"
 #include "libbtf/core/error.h"
@@ -127,6 +129,10 @@ struct ErrorAccumulator {
     }
     sse += s, energy += e, max_abs = std::max(max_abs, m), peak = std::max(peak, p), count += n;
   }
+  void Merge(const ErrorAccumulator& o) {
+    sse += o.sse, energy += o.energy, max_abs = std::max(max_abs, o.max_abs), peak = std::max(peak, o.peak);
+    count += o.count;
+  }
   void Fill(CompressSummary& s) const {
     s.rmse = count ? std::sqrt(sse / double(count)) : 0;
     s.relative_error = energy > 0 ? std::sqrt(sse / energy) : 0;
@@ -165,39 +171,62 @@ void CompressPcaView(const SlotInput& in, const CompressOptions& o, const Transf
   Timer t;
   // Reads the next slot on another thread while this one is decomposed (HDF5 is only ever
   // called from one thread at a time).
-  auto read = [&](int v) {
-    std::vector<float> buf(n);
-    in.read(v, buf.data());
-    return buf;
+  // Slots are decomposed P at a time, one per thread (coarse-grained parallelism: no barrier
+  // per small GEMM, robust when the cores are shared), while the next P slots are read on
+  // another thread (HDF5 is only ever called from one thread at a time).
+  const int P = std::max(1, omp_get_max_threads());
+  auto read = [&](int first) {
+    std::vector<std::vector<float>> batch;
+    for (int v = first; v < std::min(V, first + P); ++v) {
+      batch.emplace_back(n);
+      in.read(v, batch.back().data());
+    }
+    return batch;
   };
-  std::future<std::vector<float>> next = std::async(std::launch::async, read, 0);
-  std::vector<float> X(n), R(n);
+  std::future<std::vector<std::vector<float>>> next = std::async(std::launch::async, read, 0);
   int dropped = 0;
-  for (int v = 0; v < V; ++v) {
-    rep.Progress(std::size_t(v), std::size_t(V), "pca-view");
+  for (int first = 0; first < V; first += P) {
+    rep.Progress(std::size_t(first), std::size_t(V), "pca-view");
     t.Restart();
-    std::vector<float> raw = next.get();
-    if (v + 1 < V) next = std::async(std::launch::async, read, v + 1);
+    std::vector<std::vector<float>> raw = next.get();
+    if (first + P < V) next = std::async(std::launch::async, read, first + P);
     sum.times.Add("read", t.Seconds());
     t.Restart();
-    CheckFinite(in, v, raw.data());
-    std::copy(raw.begin(), raw.end(), X.begin());
-    tr.Apply(in, v, X.data(), n);
-    const Eigen::Map<const RowMatrixXf> xm(X.data(), L, static_cast<Eigen::Index>(D));
-    PcaResult r = Pca(xm, MakeRequest(o, std::uint64_t(v)));
-    dropped += r.dropped_null;
-    PcaViewSlot& s = slots[static_cast<std::size_t>(v)];
-    s.components = r.components();
-    s.mean.assign(r.mean.data(), r.mean.data() + D);
-    s.basis.assign(r.basis.data(), r.basis.data() + r.basis.size());
-    s.weights.assign(r.scores.data(), r.scores.data() + r.scores.size());
-    s.eigenvalues = r.eigenvalues;
+    const int count = static_cast<int>(raw.size());
+    std::vector<ErrorAccumulator> errs(static_cast<std::size_t>(count));
+    std::vector<std::exception_ptr> failures(static_cast<std::size_t>(count));
+    std::vector<int> drops(static_cast<std::size_t>(count), 0);
+#pragma omp parallel for schedule(static, 1) num_threads(count)
+    for (int b = 0; b < count; ++b) {
+      const int v = first + b;
+      try {
+        const std::vector<float>& r0 = raw[static_cast<std::size_t>(b)];
+        CheckFinite(in, v, r0.data());
+        std::vector<float> X(r0);
+        tr.Apply(in, v, X.data(), n);
+        const Eigen::Map<const RowMatrixXf> xm(X.data(), L, static_cast<Eigen::Index>(D));
+        PcaResult r = Pca(xm, MakeRequest(o, std::uint64_t(v)));
+        drops[static_cast<std::size_t>(b)] = r.dropped_null;
+        PcaViewSlot& s = slots[static_cast<std::size_t>(v)];
+        s.components = r.components();
+        s.mean.assign(r.mean.data(), r.mean.data() + D);
+        s.basis.assign(r.basis.data(), r.basis.data() + r.basis.size());
+        s.weights.assign(r.scores.data(), r.scores.data() + r.scores.size());
+        s.eigenvalues = r.eigenvalues;
+        codec.DecodeViewSlot(v, X.data());  // reconstruction, for the errors
+        errs[static_cast<std::size_t>(b)].Add(r0.data(), X.data(), n);
+      } catch (...) {
+        failures[static_cast<std::size_t>(b)] = std::current_exception();
+      }
+    }
+    for (const auto& f : failures)
+      if (f) std::rethrow_exception(f);
+    for (int b = 0; b < count; ++b) {
+      err.Merge(errs[static_cast<std::size_t>(b)]);
+      dropped += drops[static_cast<std::size_t>(b)];
+      sum.slot_components.push_back(slots[static_cast<std::size_t>(first + b)].components);
+    }
     sum.times.Add("decompose", t.Seconds());
-    t.Restart();
-    codec.DecodeViewSlot(v, R.data());
-    err.Add(raw.data(), R.data(), n);
-    sum.times.Add("evaluate", t.Seconds());
-    sum.slot_components.push_back(s.components);
   }
   rep.Progress(std::size_t(V), std::size_t(V), "pca-view");
   if (dropped > 0) {
@@ -326,13 +355,19 @@ void CompressLpca(const SlotInput& in, const CompressOptions& o, const Transform
     }
     f.pca.assign(static_cast<std::size_t>(K), PcaResult{});
     double res = 0;
-    for (int k = 0; k < K; ++k) {
+    // One cluster per thread (Eigen runs single-threaded inside a parallel region), largest first.
+    std::vector<int> order_k(static_cast<std::size_t>(K));
+    std::iota(order_k.begin(), order_k.end(), 0);
+    std::stable_sort(order_k.begin(), order_k.end(), [&](int a, int b) {
+      return members[static_cast<std::size_t>(a)].size() > members[static_cast<std::size_t>(b)].size();
+    });
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : res)
+    for (int kk = 0; kk < K; ++kk) {
+      const int k = order_k[static_cast<std::size_t>(kk)];
       const auto& m = members[static_cast<std::size_t>(k)];
       if (m.empty()) continue;
       RowMatrixXf X(static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d));
-#pragma omp parallel for schedule(static)
-      for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(m.size()); ++i)
-        X.row(i) = A.row(static_cast<Eigen::Index>(m[static_cast<std::size_t>(i)]));
+      for (std::size_t i = 0; i < m.size(); ++i) X.row(Eigen::Index(i)) = A.row(static_cast<Eigen::Index>(m[i]));
       f.pca[static_cast<std::size_t>(k)] = Pca(X, MakeRequest(o, std::uint64_t(k)));
       res += f.pca[static_cast<std::size_t>(k)].residual_energy;
     }
