@@ -125,6 +125,23 @@ TEST(BtfEvalCli, SweepWritesResultsPlotsAndReport) {
   EXPECT_EQ(html.find("src=\"render_"), std::string::npos);
 }
 
+TEST(BtfEvalCli, SweepRefusesBadInputAndOptions) {
+  const auto dir = test::TempDir();
+  const std::string tool = test::Tool("btf-eval");
+  Dataset d = test::MakeTestDataset(2, 3, 4, 4);
+  WriteDataset(dir / "ok.h5", d);
+  d.at(0, 1, 2, 3, 2) = std::numeric_limits<float>::quiet_NaN();
+  WriteDataset(dir / "nan.h5", d);
+  std::string out;
+  EXPECT_EQ(test::RunCommand(tool + " sweep " + Q(dir / "nan.h5") + " -o " + Q(dir / "s") + " -q 2>&1", &out), 3);
+  EXPECT_NE(out.find("view 0 light 1 texel (y 2, x 3) channel 2 is NaN"), std::string::npos) << out;
+  EXPECT_FALSE(std::filesystem::exists(dir / "s" / "report.html"));
+  EXPECT_EQ(test::RunCommand(tool + " sweep " + Q(dir / "ok.h5") + " -o " + Q(dir / "s") + " --methods svd -q 2>&1", &out), 2);
+  EXPECT_NE(out.find("svd"), std::string::npos) << out;
+  EXPECT_EQ(test::RunCommand(tool + " sweep " + Q(dir / "ok.h5") + " -o " + Q(dir / "s") + " --runs 0 -q 2>/dev/null"), 2);
+  EXPECT_EQ(test::RunCommand(tool + " sweep " + Q(dir / "ok.h5") + " -o " + Q(dir / "s") + " --components 0 -q 2>/dev/null"), 2);
+}
+
 TEST(BtfEvalCli, StabilityJson) {
   std::string out;
   ASSERT_EQ(test::RunCommand(test::Tool("btf-eval") + " stability --only input/ directions/ --json -q", &out), 0);
