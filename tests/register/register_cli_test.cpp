@@ -1,0 +1,184 @@
+// End-to-end: btf-synth photos -> btf-register run, against truth.json and the ground-truth BTF.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+
+#include <nlohmann/json.hpp>
+
+#include "libbtf/io/dataset_io.h"
+#include "libbtf/io/rig.h"
+#include "tests/test_util.h"
+
+namespace btf {
+namespace {
+
+using json = nlohmann::json;
+
+json ReadJson(const std::filesystem::path& p) {
+  std::ifstream in(p);
+  return json::parse(in);
+}
+
+// Relative RMS over all values of two datasets of the same shape.
+double RelRms(const Dataset& ref, const Dataset& test) {
+  double e = 0, r = 0;
+  for (std::size_t i = 0; i < ref.size(); ++i) {
+    e += std::pow(double(ref.data()[i]) - test.data()[i], 2);
+    r += std::pow(double(ref.data()[i]), 2);
+  }
+  return std::sqrt(e / r);
+}
+
+// Small clean photo set, made once: 640x480, views 0 and 45 deg, two lights, markers 0.5 mm high.
+const std::filesystem::path& PhotoSet() {
+  static const std::filesystem::path dir = [] {
+    const auto d = test::TempDir().parent_path() / "register-photos";
+    std::filesystem::remove_all(d);
+    const std::string cmd = test::Tool("btf-synth") +
+                            " photos --quiet --views 0,25 --lights 0,30 --width 640 --height 480 --marker-height 0.5 -o " +
+                            d.string() + " && " + test::Tool("btf-synth") +
+                            " btf --quiet --views 0,25 --lights 0,30 --resolution 32 --tiles 10 --samples 8 -o " +
+                            (d / "gt.h5").string() + " 2>/dev/null";
+    EXPECT_EQ(test::RunCommand(cmd), 0) << cmd;
+    return d;
+  }();
+  return dir;
+}
+
+TEST(RegisterCli, RegistersSynthPhotosAgainstTruth) {
+  const auto& ph = PhotoSet();
+  const auto dir = test::TempDir();
+  std::string out;
+  const std::string cmd = test::Tool("btf-register") + " run --quiet --json " + (ph / "manifest.json").string() +
+                          " -o " + (dir / "d.h5").string() + " --resolution 32 --truth " +
+                          (ph / "truth.json").string() + " --report " + (dir / "r.json").string() +
+                          " --contact-sheet " + (dir / "s.png").string();
+  ASSERT_EQ(test::RunCommand(cmd, &out), 0) << cmd << "\n" << out;
+  const json j = json::parse(out);
+  EXPECT_EQ(j["photos_ok"], 4);
+  EXPECT_EQ(j["photos_failed"], 0);
+  EXPECT_TRUE(std::filesystem::exists(dir / "s.png"));
+  const json rep = ReadJson(dir / "r.json");
+  ASSERT_EQ(rep["photos"].size(), 4u);
+  for (const auto& p : rep["photos"]) {
+    EXPECT_EQ(p["status"], "ok");
+    EXPECT_EQ(p["markers_found"], 8);
+    EXPECT_EQ(p["model"], "pose");
+    // Measured 0.029 px (0 deg) and 0.002 px (45 deg) over the sample; 0.1 px bound.
+    EXPECT_LT(p["truth_homography_rms_px"].get<double>(), 0.1) << p["file"];
+    // Corners: 0.13 px at 0 deg is btf-synth's 3x3 pixel sampling of axis-aligned edges
+    // (0.03 px with --pixel-samples 8, docs/btf-register.md); 0.03 px at 45 deg.
+    EXPECT_LT(p["truth_corner_rms_px"].get<double>(), 0.2) << p["file"];
+  }
+  // Against the ground-truth BTF at 32^2 (texel = 6 photo px): measured rel RMS 0.017-0.036,
+  // scale within 0.8%; bound 0.06. A one-texel misregistration gives > 0.3.
+  const Dataset reg = ReadDataset(dir / "d.h5"), gt = ReadDataset(ph / "gt.h5");
+  ASSERT_EQ(reg.size(), gt.size());
+  EXPECT_EQ(reg.info().units, "brdf_per_sr");
+  EXPECT_FALSE(reg.info().cos_theta_i_included);
+  EXPECT_NEAR(reg.info().texel_size_mm, 40.0 / 32, 1e-12);
+  EXPECT_LT(RelRms(gt, reg), 0.06);
+}
+
+TEST(RegisterCli, AFailingPhotoIsReportedAndTheRestStillWritten) {
+  const auto& ph = PhotoSet();
+  const auto dir = test::TempDir();
+  for (const auto& f : std::filesystem::directory_iterator(ph)) std::filesystem::copy(f.path(), dir / f.path().filename());
+  std::filesystem::remove(dir / "v025_l030.png");  // manifest entry without a file
+  {
+    std::ofstream bad(dir / "v000_l030.png");  // unreadable photo
+    bad << "not a png";
+  }
+  std::string out;
+  const std::string base = test::Tool("btf-register") + " run --quiet --json " + (dir / "manifest.json").string() +
+                           " --resolution 16 --report " + (dir / "r.json").string() + " -o ";
+  EXPECT_EQ(test::RunCommand(base + (dir / "a.h5").string(), &out), 3) << out;  // bad input: photos failed
+  json j = json::parse(out);
+  EXPECT_EQ(j["photos_ok"], 2);
+  EXPECT_EQ(j["photos_failed"], 2);
+  EXPECT_TRUE(std::filesystem::exists(dir / "a.h5"));  // the others are kept
+  const json rep = ReadJson(dir / "r.json");
+  for (const auto& p : rep["photos"])
+    if (p["file"] == "v025_l030.png" || p["file"] == "v000_l030.png") {
+      EXPECT_EQ(p["status"], "failed");
+      EXPECT_NE(p["error"].get<std::string>().find(p["file"].get<std::string>()), std::string::npos) << p["error"];
+    }
+  // Light 30 has no registered photo left: the dataset keeps lights with at least one photo.
+  const Dataset d = ReadDataset(dir / "a.h5");
+  EXPECT_EQ(d.num_views(), 2);
+  EXPECT_EQ(d.num_lights(), 1);
+  EXPECT_EQ(test::RunCommand(base + (dir / "b.h5").string() + " --allow-missing", &out), 0) << out;
+}
+
+TEST(RegisterCli, MissingPairsAreFilledFromTheNearestLight) {
+  const auto& ph = PhotoSet();
+  const auto dir = test::TempDir();
+  for (const auto& f : std::filesystem::directory_iterator(ph)) std::filesystem::copy(f.path(), dir / f.path().filename());
+  std::filesystem::remove(dir / "v025_l030.png");
+  std::string out;
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-register") + " run --quiet --json --allow-missing " +
+                                 (dir / "manifest.json").string() + " --resolution 16 -o " + (dir / "d.h5").string(),
+                             &out),
+            0);
+  const json j = json::parse(out);
+  ASSERT_EQ(j["filled"].size(), 1u);
+  EXPECT_EQ(j["filled"][0]["view_index"], 25);
+  EXPECT_EQ(j["filled"][0]["light_index"], 30);
+  const Dataset d = ReadDataset(dir / "d.h5");
+  ASSERT_EQ(d.num_lights(), 2);
+  const auto a = d.image(1, 0), b = d.image(1, 1);  // view 25: light 30 filled from light 0
+  EXPECT_TRUE(std::equal(a.begin(), a.end(), b.begin()));
+}
+
+TEST(RegisterCli, MalformedManifestOrBoardFailsFastWithoutOutput) {
+  const auto& ph = PhotoSet();
+  const auto dir = test::TempDir();
+  for (const auto& f : std::filesystem::directory_iterator(ph)) std::filesystem::copy(f.path(), dir / f.path().filename());
+  json m = ReadJson(dir / "manifest.json");
+  m["photos"][1].erase("exposure");
+  std::ofstream(dir / "bad.json") << m.dump();
+  std::string out;
+  const std::string cmd = test::Tool("btf-register") + " run --quiet " + (dir / "bad.json").string() + " -o " +
+                          (dir / "x.h5").string() + " 2>&1";
+  EXPECT_EQ(test::RunCommand(cmd, &out), 3);
+  EXPECT_NE(out.find("photos[1]"), std::string::npos) << out;
+  EXPECT_NE(out.find("exposure"), std::string::npos) << out;
+  EXPECT_FALSE(std::filesystem::exists(dir / "x.h5"));
+  json b = ReadJson(dir / "board.json");
+  b["markers"][2]["id"] = b["markers"][1]["id"];  // duplicate id on the board
+  std::ofstream(dir / "board.json") << b.dump();
+  EXPECT_EQ(test::RunCommand(test::Tool("btf-register") + " run --quiet " + (dir / "manifest.json").string() + " -o " +
+                                 (dir / "x.h5").string() + " 2>&1",
+                             &out),
+            3);
+  EXPECT_NE(out.find("duplicate marker id"), std::string::npos) << out;
+  EXPECT_FALSE(std::filesystem::exists(dir / "x.h5"));
+}
+
+TEST(RegisterCli, DetectPrintsCornersInTheDocumentedConvention) {
+  const auto& ph = PhotoSet();
+  std::string out;
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-register") + " detect --json " + (ph / "v025_l000.png").string(), &out), 0);
+  const json j = json::parse(out);
+  const auto truth = ReadTruth(ph / "truth.json");
+  const PhotoTruth* t = nullptr;
+  for (const auto& x : truth)
+    if (x.file == "v025_l000.png") t = &x;
+  ASSERT_NE(t, nullptr);
+  ASSERT_EQ(j["tags"].size(), t->marker_corners_px.size());
+  for (const auto& tag : j["tags"]) {
+    const auto& c = t->marker_corners_px.at(tag["id"].get<int>());
+    for (int k = 0; k < 4; ++k) {
+      // Same order and pixel convention as the truth: 0.1 px per coordinate (measured RMS 0.03).
+      EXPECT_NEAR(tag["corners_px"][k][0].get<double>(), c[k].x(), 0.1);
+      EXPECT_NEAR(tag["corners_px"][k][1].get<double>(), c[k].y(), 0.1);
+    }
+  }
+  EXPECT_EQ(test::RunCommand(test::Tool("btf-register") + " detect --family nosuch " +
+                             (ph / "v025_l000.png").string() + " 2>/dev/null"),
+            2);
+}
+
+}  // namespace
+}  // namespace btf
