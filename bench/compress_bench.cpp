@@ -96,8 +96,8 @@ void BM_EigenGemm(benchmark::State& st) {
   GemmRate(sizeof(Scalar) == 8) = gflops;
   st.counters["GFLOPs"] = gflops;
 }
-BENCHMARK_TEMPLATE(BM_EigenGemm, float)->Unit(benchmark::kMillisecond)->MinTime(2.0);
-BENCHMARK_TEMPLATE(BM_EigenGemm, double)->Unit(benchmark::kMillisecond)->MinTime(2.0);
+BENCHMARK_TEMPLATE(BM_EigenGemm, float)->Unit(benchmark::kMillisecond)->MinTime(2.0)->UseRealTime();
+BENCHMARK_TEMPLATE(BM_EigenGemm, double)->Unit(benchmark::kMillisecond)->MinTime(2.0)->UseRealTime();
 
 std::unique_ptr<btf::Codec>& PcaCodec() {
   static std::unique_ptr<btf::Codec> c;
@@ -130,7 +130,7 @@ void BM_PcaView(benchmark::State& st) {
   g_pca_view_seconds_per_slot = s.times.Total() / 81;
   st.counters["seconds_per_slot"] = g_pca_view_seconds_per_slot;
 }
-BENCHMARK(BM_PcaView)->Unit(benchmark::kSecond)->Iterations(1);
+BENCHMARK(BM_PcaView)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 
 // Straightforward reference: full SVD (BDCSVD) of every centred slot, first 16 components. Run on
 // the first `slots` view slots only (it is slow); the ratio is per slot.
@@ -153,7 +153,7 @@ void BM_PcaViewFullSvdReference(benchmark::State& st) {
     st.counters["reference_slot_s_over_pca_view_slot_s"] =
         benchmark::Counter(double(slots) * g_pca_view_seconds_per_slot, benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
 }
-BENCHMARK(BM_PcaViewFullSvdReference)->Arg(4)->Unit(benchmark::kSecond)->Iterations(1);
+BENCHMARK(BM_PcaViewFullSvdReference)->Arg(4)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 
 double g_lpca_seconds = 0;
 
@@ -175,7 +175,7 @@ void BM_Lpca(benchmark::State& st) {
   // kernel benchmark below.
   g_lpca_seconds = s.times.Total();
 }
-BENCHMARK(BM_Lpca)->Arg(20)->Unit(benchmark::kSecond)->Iterations(1);
+BENCHMARK(BM_Lpca)->Arg(20)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 
 // The LPCA reassignment kernel alone (one texel block against all clusters), as a GEMM rate.
 void BM_LpcaReassignKernel(benchmark::State& st) {
@@ -197,7 +197,7 @@ void BM_LpcaReassignKernel(benchmark::State& st) {
   st.counters["GFLOPs"] = g;
   if (GemmRate(false) > 0) st.counters["fraction_of_float_gemm"] = g / GemmRate(false);
 }
-BENCHMARK(BM_LpcaReassignKernel)->Unit(benchmark::kMillisecond)->MinTime(1.0);
+BENCHMARK(BM_LpcaReassignKernel)->Unit(benchmark::kMillisecond)->MinTime(1.0)->UseRealTime();
 
 // Straightforward reference: plain Lloyd k-means on the ABRDFs (explicit distance loops, random
 // initial centres, at most 10 rounds) then a full SVD per cluster (8 components).
@@ -258,7 +258,7 @@ void BM_LpcaLloydReference(benchmark::State& st) {
     st.counters["reference_s_over_lpca_s"] =
         benchmark::Counter(g_lpca_seconds, benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
 }
-BENCHMARK(BM_LpcaLloydReference)->Unit(benchmark::kSecond)->Iterations(1);
+BENCHMARK(BM_LpcaLloydReference)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 
 void BM_DecodeViewSlot(benchmark::State& st) {
   const btf::Codec& c = st.range(0) == 0 ? *PcaCodec() : *LpcaCodec();
@@ -275,7 +275,7 @@ void BM_DecodeViewSlot(benchmark::State& st) {
   st.counters["texels_per_s"] = benchmark::Counter(double(st.iterations()) * c.num_lights() * c.height() * c.width(),
                                                    benchmark::Counter::kIsRate);
 }
-BENCHMARK(BM_DecodeViewSlot)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->MinTime(1.0);
+BENCHMARK(BM_DecodeViewSlot)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->MinTime(1.0)->UseRealTime();
 
 void BM_DecodeValue(benchmark::State& st) {
   const btf::Codec& c = st.range(0) == 0 ? *PcaCodec() : *LpcaCodec();
@@ -291,7 +291,7 @@ void BM_DecodeValue(benchmark::State& st) {
   st.SetLabel(st.range(0) == 0 ? "pca-view" : "lpca");
   st.counters["values_per_s"] = benchmark::Counter(double(st.iterations()), benchmark::Counter::kIsRate);
 }
-BENCHMARK(BM_DecodeValue)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond)->MinTime(1.0);
+BENCHMARK(BM_DecodeValue)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond)->MinTime(1.0)->UseRealTime();
 
 }  // namespace
 
