@@ -26,13 +26,15 @@ class DatasetBtfEvaluator final : public BtfEvaluator {
     const int y = std::min(int((1.0 - v) * d_.height()), d_.height() - 1);
     const Interpolant iv = d_.views().Barycentric(wo), il = d_.lights().Barycentric(wi);
     const int C = d_.channels();
-    double acc[16] = {0};
+    // Per-thread scratch: Eval runs millions of times per render, so no allocation per call.
+    thread_local std::vector<double> acc;
+    acc.assign(std::size_t(C), 0.0);
     for (int a = 0; a < iv.count; ++a)
       for (int b = 0; b < il.count; ++b) {
         const double w = iv.weight[a] * il.weight[b];
-        for (int c = 0; c < C && c < 16; ++c) acc[c] += w * d_.at(iv.index[a], il.index[b], y, x, c);
+        for (int c = 0; c < C; ++c) acc[c] += w * d_.at(iv.index[a], il.index[b], y, x, c);
       }
-    for (int c = 0; c < C; ++c) out[c] = float(acc[std::min(c, 15)]);
+    for (int c = 0; c < C; ++c) out[c] = float(acc[c]);
   }
 
  private:

@@ -92,6 +92,29 @@ TEST(EvalRender, CodecEvaluatorMatchesDatasetEvaluator) {
   for (std::size_t i = 0; i < a.pixels.size(); ++i) ASSERT_NEAR(a.pixels[i], b.pixels[i], 1e-3 * peak) << i;
 }
 
+TEST(EvalRender, ManyChannelsAndOneChannel) {
+  // A 20-channel (spectral-like) BTF shows its first three channels; a 1-channel BTF is grey.
+  const Sampling s = Sampling::Bonn81().Subset({0, 1, 2, 3, 4, 5, 6});
+  Dataset many(s, s, 2, 2, 20), one(s, s, 2, 2, 1);
+  many.info().channel_names.assign(20, "band");
+  one.info().channel_names = {"Y"};
+  for (std::size_t i = 0; i < many.size(); ++i) many.data()[i] = float(0.01 * (i % 20 + 1));
+  std::fill(one.data().begin(), one.data().end(), 0.05f);
+  RenderOptions o;
+  o.width = 24, o.height = 20;
+  const Image a = Render(*DatasetEvaluator(many), o), b = Render(*DatasetEvaluator(one), o);
+  for (int y = 0; y < o.height; ++y)
+    for (int x = 0; x < o.width; ++x) {
+      if (!TracePixel(o, x, y).hit) continue;
+      // Channel k of a constant BTF renders as value_k times the same geometric factor.
+      const double g = a.at(x, y, 0) / 0.01;
+      EXPECT_NEAR(a.at(x, y, 1), 0.02 * g, 1e-5 * std::max(1.0, g));
+      EXPECT_NEAR(a.at(x, y, 2), 0.03 * g, 1e-5 * std::max(1.0, g));
+      EXPECT_EQ(b.at(x, y, 0), b.at(x, y, 1));
+      EXPECT_EQ(b.at(x, y, 0), b.at(x, y, 2));
+    }
+}
+
 TEST(EvalRender, ComparisonPanelReportsTheDifference) {
   Image a(10, 8, 3), b(10, 8, 3);
   std::fill(a.pixels.begin(), a.pixels.end(), 1.0f);
