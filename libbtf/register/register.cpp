@@ -54,6 +54,38 @@ std::pair<double, double> HomographyError(const Eigen::Matrix3d& a, const Eigen:
   return {std::sqrt(ss / 121), mx};
 }
 
+// Fraction of the sample (64 x 64 grid at z = 0) whose line of sight to the camera centre crosses
+// a marker's printed area (detection square enlarged by 1/4: the quiet zone of tag36h11) at the
+// marker's height: such texels show the marker, not the cloth, in this photo.
+double OccludedFraction(const Board& board, const PhotoGeometry& g) {
+  if (!g.has_pose) return 0;
+  const Vec3 cam = -g.rotation.transpose() * g.translation;
+  const double S = board.sample_size_mm;
+  int hidden = 0;
+  for (int j = 0; j < 64; ++j)
+    for (int i = 0; i < 64; ++i) {
+      const Vec3 p(-S / 2 + (i + 0.5) * S / 64, -S / 2 + (j + 0.5) * S / 64, 0);
+      for (const auto& m : board.markers) {
+        if (!(m.height_mm > 0) || !(cam.z() > m.height_mm)) continue;
+        const Vec3 q = p + (m.height_mm / cam.z()) * (cam - p);
+        const Vec2 c = 0.25 * (m.corners_mm[0] + m.corners_mm[1] + m.corners_mm[2] + m.corners_mm[3]);
+        bool inside = true;
+        for (int k = 0; k < 4 && inside; ++k) {
+          const Vec2 a = c + 1.25 * (m.corners_mm[k] - c), b = c + 1.25 * (m.corners_mm[(k + 1) % 4] - c);
+          const Vec2 e = b - a, d = q.head<2>() - a;
+          // Same side of every edge as the centre (convex quad, either orientation).
+          const double side = e.x() * d.y() - e.y() * d.x(), ref = e.x() * (c - a).y() - e.y() * (c - a).x();
+          inside = side * ref >= 0;
+        }
+        if (inside) {
+          ++hidden;
+          break;
+        }
+      }
+    }
+  return hidden / 4096.0;
+}
+
 // Area-averaged thumbnail.
 Image Thumbnail(const Image& im, int side) {
   cv::Mat src(im.height, im.width, CV_32FC(im.channels), const_cast<float*>(im.pixels.data()));
@@ -258,6 +290,10 @@ RegisterSummary RegisterPhotos(const std::filesystem::path& manifest_path, const
                           "pixel ({:.1f}, {:.1f}))",
                           q.x(), q.y(), px.x(), px.y());
         }
+      if (const double occ = OccludedFraction(board, g); occ > 0)
+        r.warnings.push_back(fmt::format("{:.1f}% of the sample is hidden behind raised markers in this view (texels at "
+                                         "the edge show the marker)",
+                                         100 * occ));
       geoms[i] = g;
       r.ok = true;
     } catch (const Cancelled&) {

@@ -62,6 +62,8 @@ TEST(RegisterAccuracy, PerElevationUpTo75Degrees) {
     fmt::print("{:5.0f}  {:7d}  {:13.3f}  {:17.4f}  {:17.4f}  {:11.4f}  {:16.4f}\n", theta, p["markers_found"].get<int>(),
                corner, hrms, hmax, rel, rel_in);
     EXPECT_EQ(p["status"], "ok");
+    // The occlusion warning fires exactly where the table shows the edge strip (75 deg only).
+    EXPECT_EQ(p["warnings"].size(), theta > 70 ? 1u : 0u) << theta << " " << p["warnings"].dump();
     // Bounds (measured values in docs/btf-register.md): the homography over the sample within 0.1 px
     // at every elevation up to 75 deg; corners 0.2 px (0-15 deg suffer btf-synth's 3x3 pixel
     // sampling of axis-aligned edges), 0.1 px from 30 to 75 deg.
