@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 
 #include "libbtf/core/error.h"
 #include "libbtf/register/detect.h"
@@ -40,6 +41,7 @@ TEST(Detect, FindsEveryMarkerWithSubPixelCornersInBoardOrder) {
     const auto dets = det.Detect(photo);
     int matched = 0;
     const double rms = CornerRms(dets, board, cam.Geometry(), &matched);
+    std::printf("theta %2.0f: corner RMS %.3f px over %d markers\n", theta, rms, matched);  // docs/btf-register.md
     EXPECT_EQ(matched, 8) << "theta " << theta;
     EXPECT_EQ(dets.size(), 8u);
     EXPECT_LT(rms, 0.05) << "theta " << theta;
