@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <random>
 
 #include <Eigen/LU>
@@ -41,6 +42,7 @@ TEST(Lattice, RecoversAnObliqueLatticeToFiveThousandthsOfATexel) {
   const Vec2 a1(12.37, 0.41), a2(-0.23, 15.81);
   const Image im = PeriodicImage(256, a1, a2, 0.05, 1);
   const Lattice L = EstimateLattice(im.pixels, 256, 256);
+  std::printf("lattice vector errors %.5f %.5f texels\n", (L.a1 - a1).norm(), (L.a2 - a2).norm());  // docs
   EXPECT_LT((L.a1 - a1).norm(), 0.005) << L.ToJson().dump();
   EXPECT_LT((L.a2 - a2).norm(), 0.005) << L.ToJson().dump();
   EXPECT_EQ(L.yarn_cells_per_repeat, 1);
@@ -87,6 +89,7 @@ TEST(Lattice, FindsTheTwillRepeatNotTheYarnSpacing) {
     }
   e_ok = std::sqrt(e_ok / (n * n));
   e_wrong = std::sqrt(e_wrong / (n * n));
+  std::printf("twill re-tiling RMS %.4f on the repeat, %.4f on the yarn spacing\n", e_ok, e_wrong);  // docs
   // The erased diagonal has RMS 0.12/sqrt(2) = 0.085. Two bicubic resamplings on the right lattice
   // cost 0.0016 (measured); bound 0.005.
   EXPECT_LT(e_ok, 0.005);
