@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 
 #include "libbtf/core/error.h"
 #include "libbtf/register/radiometry.h"
@@ -60,6 +61,7 @@ AliasCase RunAliasCase() {
 
 TEST(Rectify, FootprintFilterBeatsPlainBilinearOnAnObliqueFinePattern) {
   const AliasCase r = RunAliasCase();
+  std::printf("70 deg fine pattern: RMS %.4f footprint filter, %.4f plain bilinear\n", r.rms_ours, r.rms_bilinear);
   // Point sampling keeps the fine pattern's amplitude 0.2 (RMS ~0.14); the box filter removes it
   // up to the photo's own pixel blur. Bounds: ours < 0.02 absolute, and 5x better than bilinear.
   EXPECT_GT(r.rms_bilinear, 0.08);
