@@ -344,7 +344,7 @@ AveragedTile AverageTiles(const Image& image, const Lattice& L, const TileAverag
   A << L.a1, L.a2;
   const Eigen::Matrix2d Ainv = A.inverse();
   double imin = 1e300, imax = -1e300, jmin = 1e300, jmax = -1e300;
-  for (const Vec2 c : {Vec2(0, 0), Vec2(image.width - 1, 0), Vec2(0, image.height - 1),
+  for (const Vec2& c : {Vec2(0, 0), Vec2(image.width - 1, 0), Vec2(0, image.height - 1),
                        Vec2(image.width - 1, image.height - 1)}) {
     const Vec2 ij = Ainv * (c - L.origin);
     imin = std::min(imin, ij.x()), imax = std::max(imax, ij.x());
