@@ -7,6 +7,7 @@
 
 #include "libbtf/core/atomic_file.h"
 #include "libbtf/core/error.h"
+#include "libbtf/io/json_util.h"
 
 namespace btf {
 namespace {
@@ -115,13 +116,6 @@ json Header(const char* format) {
   return j;
 }
 
-json ToJson(const Vec2& v) { return json::array({v.x(), v.y()}); }
-json ToJson(const Vec3& v) { return json::array({v.x(), v.y(), v.z()}); }
-json ToJson(const Eigen::Matrix3d& m) {
-  json j = json::array();
-  for (int r = 0; r < 3; ++r) j.push_back(json::array({m(r, 0), m(r, 1), m(r, 2)}));
-  return j;
-}
 
 json SamplingToJson(const Sampling& s) {
   json j;

@@ -14,6 +14,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "libbtf/core/error.h"
+#include "libbtf/io/json_util.h"
 #include "libbtf/register/radiometry.h"
 
 namespace btf {
@@ -21,13 +22,6 @@ namespace {
 
 using json = nlohmann::json;
 
-json ToJson(const Vec2& v) { return json::array({v.x(), v.y()}); }
-json ToJson(const Vec3& v) { return json::array({v.x(), v.y(), v.z()}); }
-json ToJson(const Eigen::Matrix3d& m) {
-  json j = json::array();
-  for (int r = 0; r < 3; ++r) j.push_back(json::array({m(r, 0), m(r, 1), m(r, 2)}));
-  return j;
-}
 
 // Reads a photo; non-finite values become 0 (counted in a warning) so nothing non-finite escapes.
 Image ReadPhoto(const std::filesystem::path& path, std::vector<std::string>* warnings) {
