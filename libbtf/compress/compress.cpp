@@ -459,8 +459,8 @@ void CompressLpca(const SlotInput& in, const CompressOptions& o, const Transform
     if (p.clamped_to < std::min(o.components, int(d))) ++small;
     dropped += p.dropped_null;
     m.cluster_components[static_cast<std::size_t>(k)] = p.components();
-    std::copy(p.mean.data(), p.mean.data() + d, &m.means[std::size_t(k) * d]);
-    std::copy(p.basis.data(), p.basis.data() + p.basis.size(), &m.basis[std::size_t(k) * c * d]);
+    std::copy(p.mean.data(), p.mean.data() + d, m.means.data() + std::size_t(k) * d);
+    std::copy(p.basis.data(), p.basis.data() + p.basis.size(), m.basis.data() + std::size_t(k) * c * d);
   }
   // Members are visited in texel order, as fit_clusters gathered them.
   for (std::size_t i = 0; i < N; ++i) {
