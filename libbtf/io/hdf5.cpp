@@ -94,18 +94,22 @@ File File::Create(const std::filesystem::path& path) {
   return f;
 }
 
-File File::Open(const std::filesystem::path& path) {
+File File::OpenExisting(const std::filesystem::path& path, unsigned flags) {
   SilenceErrors();
-  File f;
-  f.path_ = path.string();
   std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec)) ThrowIo("cannot open '{}': no such file", f.path_);
-  CheckSuperblock(f.path_);
-  f.file_ = Handle(H5Fopen(f.path_.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT));
-  if (!f.file_.valid())
-    ThrowBadInput("cannot open HDF5 file '{}': the file is truncated or corrupt; re-create or re-copy it", f.path_);
+  if (!std::filesystem::is_regular_file(path, ec)) ThrowIo("cannot open '{}': no such file", path.string());
+  CheckSuperblock(path.string());
+  const hid_t id = H5Fopen(path.c_str(), flags, H5P_DEFAULT);
+  if (id < 0)
+    ThrowBadInput("cannot open HDF5 file '{}': the file is truncated or corrupt; re-create or re-copy it", path.string());
+  File f;
+  f.file_ = Handle(id);
+  f.path_ = path.string();
   return f;
 }
+
+File File::Open(const std::filesystem::path& path) { return OpenExisting(path, H5F_ACC_RDONLY); }
+File File::OpenForUpdate(const std::filesystem::path& path) { return OpenExisting(path, H5F_ACC_RDWR); }
 
 bool File::Exists(const std::string& object) const {
   if (object == "/") return true;

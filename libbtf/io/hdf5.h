@@ -44,6 +44,8 @@ class File {
   static File Create(const std::filesystem::path& path);
   // Opens read-only; a missing, truncated or non-HDF5 file gives a bad-input/I/O error.
   static File Open(const std::filesystem::path& path);
+  // Opens read-write, with the same checks as Open (edits in place: tests and fuzzers that damage files).
+  static File OpenForUpdate(const std::filesystem::path& path);
 
   hid_t id() const { return file_.id(); }
   const std::string& path() const { return path_; }
@@ -93,6 +95,7 @@ class File {
   void Flush() const;
 
  private:
+  static File OpenExisting(const std::filesystem::path& path, unsigned flags);
   Handle OpenDataset(const std::string& name) const;
   Handle file_;
   std::string path_;

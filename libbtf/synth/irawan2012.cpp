@@ -64,17 +64,22 @@ std::uint64_t Mix(std::uint64_t z) {
   z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
   return z ^ (z >> 31);
 }
-std::uint64_t Hash(std::int64_t a, std::int64_t b, std::uint64_t stream) {
-  return Mix(Mix(Mix(stream) ^ static_cast<std::uint64_t>(a)) ^ static_cast<std::uint64_t>(b));
-}
+// Integer keys are hashed as unsigned (wrapping) so no key arithmetic can overflow.
+std::uint64_t Hash(std::uint64_t a, std::uint64_t b, std::uint64_t stream) { return Mix(Mix(Mix(stream) ^ a) ^ b); }
 // Uniform in (0, 1] (never 0, so -log stays finite).
-double Hash01(std::int64_t a, std::int64_t b, std::uint64_t stream) {
+double Hash01(std::uint64_t a, std::uint64_t b, std::uint64_t stream) {
   return static_cast<double>((Hash(a, b, stream) >> 11) + 1) * 0x1.0p-53;
 }
 // 1-D gradient noise with quintic fade, gradients uniform in [-1, 1]: |n(x)| <= 1/2.
+// Lattice key of a coordinate: floor(x) as a wrapping integer; coordinates too large (or not
+// finite) to hold a fraction map to key 0 instead of an undefined float-to-int conversion.
+std::uint64_t LatticeKey(double x) {
+  return std::abs(x) < 0x1p62 ? static_cast<std::uint64_t>(static_cast<std::int64_t>(std::floor(x))) : 0;
+}
 double GradientNoise1(double x) {
+  if (!(std::abs(x) < 0x1p52)) return 0;  // no fraction left: the noise is 0 at lattice points
   const double i = std::floor(x), f = x - i;
-  const auto k = static_cast<std::int64_t>(i);
+  const std::uint64_t k = LatticeKey(i);
   const double g0 = 2 * Hash01(k, 0, 0x6e6f697365ULL) - 1, g1 = 2 * Hash01(k + 1, 0, 0x6e6f697365ULL) - 1;
   const double s = f * f * f * (f * (f * 6 - 15) + 10);
   return (1 - s) * g0 * f + s * g1 * (f - 1);
@@ -127,8 +132,9 @@ Irawan2012Model::Irawan2012Model(std::string preset_name, WeavePattern pattern, 
 
 Irawan2012Model::Local Irawan2012Model::Locate(const Vec2& uv_in) const {
   const double W = pattern_.tile_width, H = pattern_.tile_height;
-  const double u = std::isfinite(uv_in.x()) ? uv_in.x() : 0.0;
-  const double v = std::isfinite(uv_in.y()) ? uv_in.y() : 0.0;
+  // Beyond 2^30 a double uv has no sub-cell precision left; such (and non-finite) uv read as 0.
+  const auto usable = [](double t) { return std::abs(t) < 0x1p30 ? t : 0.0; };
+  const double u = usable(uv_in.x()), v = usable(uv_in.y());
   Local loc{};
   loc.cell_x = u * options_.repeat_u * W;
   loc.cell_y = (1 - v) * options_.repeat_v * H;  // pattern rows are listed from the top
@@ -160,8 +166,7 @@ double Irawan2012Model::NoisyUmax(const Local& loc, const WeaveYarn& y) const {
   const double d_weft = warp ? pattern_.d_warp_umax_over_d_weft : pattern_.d_weft_umax_over_d_weft;
   // One seed per segment (its centre, quantised to 1/64 cell), one noise value along each
   // thread direction: the same structure as Mitsuba's, with our own hash and noise.
-  const auto kx = static_cast<std::int64_t>(std::llround(loc.center_x * 64));
-  const auto ky = static_cast<std::int64_t>(std::llround(loc.center_y * 64));
+  const std::uint64_t kx = LatticeKey(std::round(loc.center_x * 64)), ky = LatticeKey(std::round(loc.center_y * 64));
   const double sx = pattern_.tile_height * options_.repeat_v + Hash01(kx, 2 * ky, 0x756d6178ULL);
   const double sy = pattern_.tile_width * options_.repeat_u + Hash01(kx, 2 * ky + 1, 0x756d6178ULL);
   const double r1 = GradientNoise1((loc.center_x * sx + loc.center_y) / pattern_.period);
@@ -173,8 +178,7 @@ double Irawan2012Model::NoisyUmax(const Local& loc, const WeaveYarn& y) const {
 double Irawan2012Model::IntensityVariation(const Local& loc) const {
   if (!options_.noise || pattern_.fineness <= 0) return 1;
   // Exp(1) factor per 1/fineness grid cell of the (unrotated) pattern position.
-  const auto ix = static_cast<std::int64_t>(std::floor(loc.cell_x * pattern_.fineness));
-  const auto iy = static_cast<std::int64_t>(std::floor(loc.cell_y * pattern_.fineness));
+  const std::uint64_t ix = LatticeKey(loc.cell_x * pattern_.fineness), iy = LatticeKey(loc.cell_y * pattern_.fineness);
   return std::min(-std::log(Hash01(ix, iy, 0x69765f6eULL)), 10.0);
 }
 
@@ -314,8 +318,8 @@ void Irawan2012Model::ComputeNormalization() {
   const long long chunks = (N + kChunk - 1) / kChunk;
   std::vector<double> sums(static_cast<std::size_t>(chunks)), sums2(static_cast<std::size_t>(chunks));
   auto cell_point = [&](long long cell, long long k, std::uint64_t dim) {
-    const double jx = Hash01(k, static_cast<std::int64_t>(dim), 0x6e73706563ULL) - 0x1.0p-54;
-    const double jy = Hash01(k, static_cast<std::int64_t>(dim + 1), 0x6e73706563ULL) - 0x1.0p-54;
+    const double jx = Hash01(static_cast<std::uint64_t>(k), dim, 0x6e73706563ULL) - 0x1.0p-54;
+    const double jy = Hash01(static_cast<std::uint64_t>(k), dim + 1, 0x6e73706563ULL) - 0x1.0p-54;
     return Vec2((static_cast<double>(cell % n) + jx) / static_cast<double>(n),
                 (static_cast<double>(cell / n) + jy) / static_cast<double>(n));
   };
@@ -431,7 +435,8 @@ std::unique_ptr<Irawan2012Model> MakeIrawan2012(const std::string& preset, const
   if (!params.is_object()) ThrowUsage("irawan2012 parameters must be a JSON object, got {}", params.dump());
   static const char* const kKnown[] = {"repeat_u", "repeat_v", "noise",   "nspec_samples", "tile_mm",  "kd",
                                        "ks",       "warp_kd",  "warp_ks", "weft_kd",       "weft_ks",  "variables"};
-  for (const auto& [key, value] : params.items()) {
+  for (const auto& item : params.items()) {
+    const std::string& key = item.key();  // not a structured binding: clang 14 cannot capture those
     if (std::find_if(std::begin(kKnown), std::end(kKnown), [&](const char* k) { return key == k; }) == std::end(kKnown))
       ThrowUsage("unknown irawan2012 parameter '{}' (known: repeat_u, repeat_v, noise, nspec_samples, tile_mm, kd, ks, "
                  "warp_kd, warp_ks, weft_kd, weft_ks, variables)",
