@@ -224,7 +224,7 @@ std::vector<float> Codec::DecodeAbrdf(int y, int x) const {
 }
 
 Dataset Codec::DecodeAll() const {
-  CheckAllocation(RawBytes(4), "decoded BTF");
+  CheckAllocation(4.0 * num_views() * num_lights() * height() * width() * channels(), "decoded BTF");
   Dataset d(views_, lights_, height_, width_, channels_, info_);
   for (int v = 0; v < num_views(); ++v) DecodeViewSlot(v, d.view_slot(v).data());
   return d;

@@ -153,7 +153,7 @@ Codec ReadCodec(const std::filesystem::path& path) {
       const int k = comps[static_cast<std::size_t>(v)];
       if (k < 0 || hsize_t(k) > L)
         ThrowBadInput("'{}': view slot {} claims {} components (at most {} lights)", path.string(), v, k, L);
-      CheckAllocation((D * (k + 1) + L * k) * 4, fmt::format("'{}' view slot {}", path.string(), v));
+      CheckAllocation(4.0 * (double(D) * (k + 1) + double(L) * k), fmt::format("'{}' view slot {}", path.string(), v));
       s.components = k;
       s.mean = ReadChecked(f, SlotName("mean", v), {hsize_t(H), hsize_t(W), hsize_t(C)});
       if (k == 0) continue;
@@ -170,7 +170,7 @@ Codec ReadCodec(const std::filesystem::path& path) {
     m.clusters = static_cast<int>(K);
     m.components = static_cast<int>(k);
     const hsize_t d = V * L * C;
-    CheckAllocation((d * K * (k + 1) + hsize_t(H) * W * (k + 1)) * 4, fmt::format("'{}' LPCA model", path.string()));
+    CheckAllocation(4.0 * (double(d) * double(K) * double(k + 1) + double(H) * W * double(k + 1)), fmt::format("'{}' LPCA model", path.string()));
     m.means = ReadChecked(f, "/codec/lpca/means", {hsize_t(K), V, L, hsize_t(C)});
     m.cluster_components = ReadIntsChecked(f, "/codec/lpca/cluster_components", {hsize_t(K)});
     for (std::size_t i = 0; i < m.cluster_components.size(); ++i)

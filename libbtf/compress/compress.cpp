@@ -248,7 +248,7 @@ void CompressLpca(const SlotInput& in, const CompressOptions& o, const Transform
                   CompressSummary& sum, const Reporter& rep) {
   const int V = in.views.size(), L = in.lights.size(), C = in.channels;
   const std::size_t N = std::size_t(in.height) * in.width, d = std::size_t(V) * L * C;
-  CheckAllocation(std::uint64_t(N) * d * 4, fmt::format("texel-major copy of '{}' for LPCA", in.name));
+  CheckAllocation(4.0 * double(N) * double(d), fmt::format("texel-major copy of '{}' for LPCA", in.name));
   Timer t;
   // Texel-major matrix A (N x d), transformed.
   RowMatrixXf A(static_cast<Eigen::Index>(N), static_cast<Eigen::Index>(d));

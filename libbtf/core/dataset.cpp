@@ -15,12 +15,12 @@ std::uint64_t MaxAllocationBytes() {
   return 16ull << 30;  // 16 GiB: two thirds of the reference 24 GiB machine
 }
 
-void CheckAllocation(std::uint64_t bytes, const std::string& what) {
+void CheckAllocation(double bytes, const std::string& what) {
   const std::uint64_t limit = MaxAllocationBytes();
-  if (bytes > limit)
+  if (!(bytes <= static_cast<double>(limit)))
     ThrowBadInput("{} needs {:.3g} GiB, over the limit of {:.3g} GiB; raise it with BTF_MAX_BYTES=<bytes> if the "
                   "machine has the memory",
-                  what, bytes / double(1ull << 30), limit / double(1ull << 30));
+                  what, bytes / double(1ull << 30), double(limit) / double(1ull << 30));
 }
 
 Dataset::Dataset(Sampling views, Sampling lights, int height, int width, int channels, DatasetInfo info)
@@ -29,13 +29,13 @@ Dataset::Dataset(Sampling views, Sampling lights, int height, int width, int cha
   if (views_.size() < 1 || lights_.size() < 1 || height < 1 || width < 1 || channels < 1)
     ThrowBadInput("dataset shape {}x{}x{}x{}x{} (views x lights x height x width x channels) must be positive",
                   views_.size(), lights_.size(), height, width, channels);
+  CheckAllocation(4.0 * views_.size() * lights_.size() * height * width * channels, "dataset");
   if (static_cast<int>(info_.channel_names.size()) != channels) {
     info_.channel_names.clear();
     for (int c = 0; c < channels; ++c)
       info_.channel_names.push_back(channels == 3 ? std::string(1, "RGB"[c]) : "C" + std::to_string(c));
   }
   const std::uint64_t n = std::uint64_t(views_.size()) * lights_.size() * height * width * channels;
-  CheckAllocation(n * sizeof(float), "dataset");
   data_.assign(n, 0.0f);
 }
 

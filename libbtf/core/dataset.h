@@ -31,7 +31,9 @@ struct DatasetInfo {
 // refused before allocating. Raise it with the environment variable BTF_MAX_BYTES.
 std::uint64_t MaxAllocationBytes();
 // Throws btf::Error (bad input) if `bytes` exceeds MaxAllocationBytes(); `what` names the item.
-void CheckAllocation(std::uint64_t bytes, const std::string& what);
+// Callers compute `bytes` in double: a crafted header's dimensions (each up to 2^20 or 2^31) can
+// multiply past 2^64, and a wrapped-around integer product would pass the check.
+void CheckAllocation(double bytes, const std::string& what);
 
 class Dataset {
  public:

@@ -74,6 +74,8 @@ DatasetHeader ReadHeader(const h5::File& f) {
   h.height = static_cast<int>(dims[2]);
   h.width = static_cast<int>(dims[3]);
   h.channels = static_cast<int>(dims[4]);
+  // Every reader holds at least one view slot; ReadDataset's Dataset checks the whole BTF.
+  CheckAllocation(4.0 * h.num_lights * h.height * h.width * h.channels, fmt::format("'{}': one view slot", f.path()));
   h.storage = f.StorageOf(kData);
   h.views = ReadSampling(f, "/btf/view");
   h.lights = ReadSampling(f, "/btf/light");

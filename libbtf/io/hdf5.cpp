@@ -298,9 +298,10 @@ namespace {
 template <typename T>
 std::vector<T> ReadWhole(const File& f, const std::string& name, hid_t mem_type, H5T_class_t want_class) {
   const auto dims = f.Dims(name);
-  std::uint64_t n = 1;
-  for (auto d : dims) n *= d;
-  CheckAllocation(n * sizeof(T), fmt::format("'{}': dataset '{}'", f.path(), name));
+  double elements = 1;
+  for (auto d : dims) elements *= double(d);
+  CheckAllocation(elements * sizeof(T), fmt::format("'{}': dataset '{}'", f.path(), name));
+  const auto n = static_cast<std::size_t>(elements);
   Handle ds(H5Dopen2(f.id(), name.c_str(), H5P_DEFAULT));
   Handle type(H5Dget_type(ds.id()));
   const H5T_class_t cls = H5Tget_class(type.id());

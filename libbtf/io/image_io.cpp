@@ -4,6 +4,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <memory>
 
 #include "libbtf/core/atomic_file.h"
 #include "libbtf/core/dataset.h"
@@ -24,6 +27,55 @@ std::string Lower(std::string s) {
   std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
   return s;
 }
+
+// OpenEXR 3.1 allocates whatever size a header attribute claims before reading it, so a damaged
+// header can cost gigabytes and seconds (found by fuzz_image). Walk the attribute list first
+// (name\0 type\0 int32 size, value; one or more headers, each ending in an empty name) and refuse
+// any attribute larger than the bytes left in the file. Files that are not OpenEXR pass through.
+void CheckExrHeader(const std::string& name) {
+  std::FILE* f = std::fopen(name.c_str(), "rb");
+  if (!f) return;  // OIIO reports the open error
+  const std::unique_ptr<std::FILE, int (*)(std::FILE*)> closer(f, std::fclose);
+  unsigned char head[8];
+  if (std::fread(head, 1, 8, f) != 8 || head[0] != 0x76 || head[1] != 0x2f || head[2] != 0x31 || head[3] != 0x01)
+    return;
+  std::error_code ec;
+  const auto file_size = static_cast<long long>(std::filesystem::file_size(name, ec));
+  const bool multipart = head[5] & 0x10;  // version flags: bit 12
+  const auto fail = [&](const std::string& what) {
+    ThrowBadInput("cannot read image '{}': corrupt OpenEXR header ({}); re-export or re-copy the file", name, what);
+  };
+  const auto read_string = [&](std::string& out) {
+    out.clear();
+    for (int c; (c = std::fgetc(f)) != 0;) {
+      if (c == EOF) fail("truncated");
+      if (out.size() >= 255) fail("attribute name longer than 255 bytes");
+      out.push_back(static_cast<char>(c));
+    }
+  };
+  std::string attr, type;
+  for (int header = 0, attributes = 0;; ++header) {
+    read_string(attr);
+    if (attr.empty()) {
+      if (header == 0) fail("no attributes");
+      break;  // single part: end of the header; multipart: the empty header ending the list
+    }
+    for (;; read_string(attr)) {
+      if (attr.empty()) break;
+      if (++attributes > 100000) fail("too many attributes");
+      read_string(type);
+      unsigned char b[4];
+      if (std::fread(b, 1, 4, f) != 4) fail("truncated");
+      const std::int32_t size = std::int32_t(std::uint32_t(b[0]) | std::uint32_t(b[1]) << 8 | std::uint32_t(b[2]) << 16 |
+                                             std::uint32_t(b[3]) << 24);
+      const long long left = file_size - std::ftell(f);
+      if (size < 0 || size > left)
+        fail(fmt::format("attribute '{}' of type '{}' claims {} bytes, {} left in the file", attr, type, size, left));
+      std::fseek(f, size, SEEK_CUR);
+    }
+    if (!multipart) break;
+  }
+}
 }  // namespace
 
 Image ReadImage(const std::filesystem::path& path) {
@@ -31,6 +83,7 @@ Image ReadImage(const std::filesystem::path& path) {
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) ThrowIo("cannot read image '{}': no such file", name);
   // Measurement data: a 4th channel is data, never premultiplied alpha to be (un)associated.
+  CheckExrHeader(name);
   OIIO::ImageSpec config;
   config.attribute("oiio:UnassociatedAlpha", 1);
   auto in = OIIO::ImageInput::open(name, &config);
@@ -38,7 +91,7 @@ Image ReadImage(const std::filesystem::path& path) {
   const OIIO::ImageSpec& spec = in->spec();
   if (spec.width < 1 || spec.height < 1 || spec.nchannels < 1)
     ThrowBadInput("image '{}' has an invalid size {}x{}x{}", name, spec.width, spec.height, spec.nchannels);
-  CheckAllocation(std::uint64_t(spec.width) * spec.height * spec.nchannels * 4, "image '" + name + "'");
+  CheckAllocation(4.0 * spec.width * spec.height * spec.nchannels, "image '" + name + "'");
   Image img(spec.width, spec.height, spec.nchannels);
   if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, img.pixels.data()))
     ThrowBadInput("cannot decode image '{}' (truncated or corrupt?): {}", name, in->geterror());

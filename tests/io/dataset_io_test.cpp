@@ -176,3 +176,23 @@ TEST(DatasetIo, RefusesFilesWithoutMetadataChecksums) {
 
 }  // namespace
 }  // namespace btf
+
+namespace btf {
+namespace {
+
+// Limits (docs/errors.md): a header claiming ~10^12 texels per image is refused before anything
+// is allocated, naming the limit and how to raise it. The file itself is small: HDF5 allocates
+// chunks only when they are written.
+TEST(DatasetIo, HeaderClaimingAbsurdSizeIsRefusedBeforeAllocating) {
+  const auto path = test::TempDir() / "huge.h5";
+  {
+    DatasetWriter w(path, Sampling::Bonn81(), Sampling::Bonn81(), 1 << 20, 1 << 20, 3, DatasetInfo{});
+    w.Commit();
+  }
+  ASSERT_LT(std::filesystem::file_size(path), 1u << 20);
+  ExpectBadInput(path, "BTF_MAX_BYTES");
+  ExpectBadInput(path, "one view slot");
+}
+
+}  // namespace
+}  // namespace btf

@@ -3,6 +3,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <fstream>
+#include <iterator>
+#include <string>
 
 #include "libbtf/core/error.h"
 #include "tests/test_util.h"
@@ -72,6 +75,30 @@ TEST(ImageIo, ErrorsNameTheFile) {
     EXPECT_NE(std::string(e.what()).find("nope.png"), std::string::npos);
   }
   EXPECT_THROW(WriteImage(dir / "x.unknownext", Ramp(2, 2, 1)), Error);
+}
+
+// Regression (fuzz_image): OpenEXR allocates what a header attribute claims before reading it, so
+// a damaged size field cost gigabytes; ReadImage refuses it from the header walk, naming the item.
+TEST(ImageIo, ExrAttributeClaimingMoreThanTheFileIsRefused) {
+  const auto dir = test::TempDir();
+  WriteImage(dir / "ok.exr", Ramp(5, 4, 3));
+  std::ifstream in(dir / "ok.exr", std::ios::binary);
+  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string key("channels\0chlist\0", 16);
+  const auto at = bytes.find(key);
+  ASSERT_NE(at, std::string::npos);
+  for (int i = 0; i < 4; ++i) bytes[at + key.size() + i] = i == 3 ? '\x7f' : '\xff';  // size 2^31 - 1
+  std::ofstream(dir / "bad.exr", std::ios::binary) << bytes;
+  try {
+    ReadImage(dir / "bad.exr");
+    FAIL() << "damaged EXR header accepted";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ExitCode::kBadInput);
+    const std::string what = e.what();
+    EXPECT_NE(what.find("bad.exr"), std::string::npos) << what;
+    EXPECT_NE(what.find("'channels'"), std::string::npos) << what;
+  }
+  EXPECT_EQ(ReadImage(dir / "ok.exr").width, 5);  // the walk accepts what we write
 }
 
 }  // namespace
