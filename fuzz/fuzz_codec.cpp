@@ -3,8 +3,8 @@
 // Two valid codec files (pca-view and lpca) are made once; each input then deletes, retypes,
 // reshapes or overwrites some of their items and attributes before ReadCodec reads the result,
 // so the fuzzer explores our validation rather than HDF5's checksum rejection. Whatever the
-// reader accepts must decode without touching memory it does not own (ASan) and give values
-// that are finite or NaN-free of our own making.
+// reader accepts must decode every view slot and an ABRDF without touching memory it does not
+// own (ASan) or undefined behaviour (UBSan).
 #include <hdf5.h>
 
 #include <cmath>
