@@ -17,6 +17,7 @@
 #include <nlohmann/json.hpp>
 
 #include "libbtf/compress/scene.h"
+#include "libbtf/core/atomic_file.h"
 #include "libbtf/core/dataset.h"
 #include "libbtf/core/progress.h"
 #include "libbtf/core/timer.h"
@@ -190,6 +191,8 @@ Codec CompressFile(const std::filesystem::path& dataset_path, const CompressOpti
 
 // Codec files ("libbtf-codec" 1.0.0, docs/format.md). Written atomically.
 void WriteCodec(const std::filesystem::path& path, const Codec& codec, const std::string& creator = "libbtf");
+// Writes into `out`'s temporary and commits it (for callers that reserved the output early).
+void WriteCodec(AtomicOutput& out, const Codec& codec, const std::string& creator = "libbtf");
 // Refuses other formats, newer major versions, missing items and inconsistent shapes (bad input).
 Codec ReadCodec(const std::filesystem::path& path);
 

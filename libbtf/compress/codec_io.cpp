@@ -50,6 +50,10 @@ int ReadDim(const h5::File& f, const char* name, int lo, int hi) {
 
 void WriteCodec(const std::filesystem::path& path, const Codec& c, const std::string& creator) {
   AtomicOutput out(path);
+  WriteCodec(out, c, creator);
+}
+
+void WriteCodec(AtomicOutput& out, const Codec& c, const std::string& creator) {
   {
     h5::File f = h5::File::Create(out.temp_path());
     f.WriteFormatHeader(kCodecFormat, kCodecFormatVersion, creator);
@@ -170,7 +174,8 @@ Codec ReadCodec(const std::filesystem::path& path) {
     m.clusters = static_cast<int>(K);
     m.components = static_cast<int>(k);
     const hsize_t d = V * L * C;
-    CheckAllocation(4.0 * (double(d) * double(K) * double(k + 1) + double(H) * W * double(k + 1)), fmt::format("'{}' LPCA model", path.string()));
+    CheckAllocation(4.0 * double(k + 1) * (double(d) * double(K) + double(H) * W),
+                    fmt::format("'{}' LPCA model", path.string()));
     m.means = ReadChecked(f, "/codec/lpca/means", {hsize_t(K), V, L, hsize_t(C)});
     m.cluster_components = ReadIntsChecked(f, "/codec/lpca/cluster_components", {hsize_t(K)});
     for (std::size_t i = 0; i < m.cluster_components.size(); ++i)

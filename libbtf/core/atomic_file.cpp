@@ -65,6 +65,11 @@ AtomicOutput::~AtomicOutput() {
   Unregister(slot_);
 }
 
+void AtomicOutput::Reserve() {
+  std::ofstream f(temp_, std::ios::binary);
+  if (!f) ThrowIo("cannot create '{}' in the output folder: no permission or disk full?", temp_.string());
+}
+
 void AtomicOutput::Commit() {
   std::error_code ec;
   std::filesystem::rename(temp_, final_, ec);

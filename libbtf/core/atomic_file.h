@@ -16,6 +16,9 @@ class AtomicOutput {
 
   const std::filesystem::path& temp_path() const { return temp_; }
   const std::filesystem::path& final_path() const { return final_; }
+  // Creates the (empty) temporary now. Tools call it before long work so that an unwritable
+  // folder fails at once, not after hours of compression. Throws btf::Error (I/O) on failure.
+  void Reserve();
   // Renames the temporary onto the final name (replacing it). Throws btf::Error (I/O) on failure.
   void Commit();
 

@@ -82,8 +82,8 @@ Image ReadImage(const std::filesystem::path& path) {
   const std::string name = path.string();
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) ThrowIo("cannot read image '{}': no such file", name);
-  // Measurement data: a 4th channel is data, never premultiplied alpha to be (un)associated.
   CheckExrHeader(name);
+  // Measurement data: a 4th channel is data, never premultiplied alpha to be (un)associated.
   OIIO::ImageSpec config;
   config.attribute("oiio:UnassociatedAlpha", 1);
   auto in = OIIO::ImageInput::open(name, &config);

@@ -150,8 +150,7 @@ Dataset GenerateBtf(const SvbrdfModel& model, const BtfOptions& o, const Reporte
   o.Check();
   Timer total;
   const int N = o.resolution;
-  CheckAllocation(4.0 * o.views.size() * o.lights.size() * N * N * model.channels(),
-                  "generated BTF");
+  CheckAllocation(4.0 * o.views.size() * o.lights.size() * N * N * model.channels(), "generated BTF");
   Dataset ds(o.views, o.lights, N, N, model.channels(), GeneratedBtfInfo(model, o));
   PhaseTimes times;
   Timer t;

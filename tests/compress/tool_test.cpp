@@ -96,6 +96,10 @@ TEST(BtfCompressTool, ExitCodes) {
   // I/O: missing input file.
   EXPECT_NE(test::RunCommand(tool + " " + Q(dir / "missing.h5") + " -o " + Q(dir / "c.h5") + " 2>/dev/null"), 0);
   EXPECT_FALSE(std::filesystem::exists(dir / "c.h5"));  // nothing half-written
+  // I/O: output folder missing. The output is claimed before compressing, so this fails at once.
+  std::string err;
+  EXPECT_EQ(test::RunCommand(tool + " " + Q(dir / "d.h5") + " -o " + Q(dir / "no" / "c.h5") + " 2>&1", &err), 4);
+  EXPECT_NE(err.find("does not exist: create it first"), std::string::npos) << err;
 }
 
 }  // namespace

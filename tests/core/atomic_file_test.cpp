@@ -32,6 +32,23 @@ TEST(AtomicOutput, CommitReplacesAndAbandonKeepsTheOldFile) {
   EXPECT_EQ(Slurp(path), "second");
 }
 
+TEST(AtomicOutput, ReserveCreatesTheTemporaryUntilCommitOrAbandon) {
+  const auto dir = test::TempDir();
+  {
+    AtomicOutput out(dir / "c.h5");
+    out.Reserve();
+    EXPECT_TRUE(std::filesystem::exists(out.temp_path()));
+    EXPECT_FALSE(std::filesystem::exists(out.final_path()));
+  }  // abandoned: the reserved temporary goes too
+  EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir), {}), 0);
+  AtomicOutput out(dir / "c.h5");
+  out.Reserve();
+  std::ofstream(out.temp_path()) << "codec";
+  out.Commit();
+  EXPECT_EQ(Slurp(dir / "c.h5"), "codec");
+  EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir), {}), 1);
+}
+
 TEST(AtomicOutput, MissingFolderIsAnIoError) {
   try {
     AtomicOutput out(test::TempDir() / "no" / "such" / "f.h5");

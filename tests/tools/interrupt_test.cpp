@@ -91,10 +91,13 @@ TEST(Interrupt, KilledCompressionLeavesTheExistingCodecUntouched) {
   const std::string before = Slurp(out);
   const pid_t pid = Spawn({test::Tool("btf-compress"), data.string(), "--method", "lpca", "--clusters", "16",
                            "--components", "8", "--quiet", "-o", out.string()});
-  // Let it get into the work (reading and clustering), then interrupt it.
+  // btf-compress reserves its temporary before the work; once it is there, let the run get into
+  // the work (reading and clustering), then interrupt it.
+  ASSERT_TRUE(WaitUntil(pid, [&] { return HasTemporary(dir); }, 60)) << "no temporary appeared";
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
   int status = 0;
   ASSERT_EQ(waitpid(pid, &status, WNOHANG), 0) << "compression finished before it could be interrupted";
+  ASSERT_TRUE(HasTemporary(dir));
   EXPECT_EQ(KillAndWait(pid, SIGTERM), SIGTERM);
   EXPECT_FALSE(HasTemporary(dir));
   EXPECT_EQ(Slurp(out), before);

@@ -125,9 +125,12 @@ int main(int argc, char** argv) {
     if (out.empty()) btf::ThrowUsage("-o/--output is required when compressing");
     co.method = btf::ParseMethod(method);
     if (!scene.empty()) co.scene = btf::SceneSpec::Load(scene);
+    // Claim the output before the work: an unwritable folder fails now, not after the compression.
+    btf::AtomicOutput target(out);
+    target.Reserve();
     btf::CompressSummary s;
     const btf::Codec codec = btf::CompressFile(dataset, co, rep, &s);
-    btf::WriteCodec(out, codec, "btf-compress");
+    btf::WriteCodec(target, codec, "btf-compress");
     if (common.json) {
       nlohmann::json j = s.ToJson();
       j["output"] = out;
