@@ -159,11 +159,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   const std::string path = "/tmp/btf-fuzz-codec-" + std::to_string(::getpid()) + ".h5";
   std::filesystem::copy_file(base_paths[b.Next() & 1], path, std::filesystem::copy_options::overwrite_existing);
   try {
-    const hid_t fid = H5Fopen(path.c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
-    Items items;
-    H5Ovisit(fid, H5_INDEX_NAME, H5_ITER_NATIVE, CollectObject, &items);
-    H5Fclose(fid);
     btf::h5::File f = btf::h5::File::OpenForUpdate(path);
+    Items items;
+    H5Ovisit(f.id(), H5_INDEX_NAME, H5_ITER_NATIVE, CollectObject, &items);
     for (int edits = b.Next() % 4 + 1; edits > 0 && !b.empty(); --edits) {
       const std::size_t pick = b.Next();
       if (pick & 1) {

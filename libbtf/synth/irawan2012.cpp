@@ -70,12 +70,12 @@ std::uint64_t Hash(std::uint64_t a, std::uint64_t b, std::uint64_t stream) { ret
 double Hash01(std::uint64_t a, std::uint64_t b, std::uint64_t stream) {
   return static_cast<double>((Hash(a, b, stream) >> 11) + 1) * 0x1.0p-53;
 }
-// 1-D gradient noise with quintic fade, gradients uniform in [-1, 1]: |n(x)| <= 1/2.
 // Lattice key of a coordinate: floor(x) as a wrapping integer; coordinates too large (or not
 // finite) to hold a fraction map to key 0 instead of an undefined float-to-int conversion.
 std::uint64_t LatticeKey(double x) {
   return std::abs(x) < 0x1p62 ? static_cast<std::uint64_t>(static_cast<std::int64_t>(std::floor(x))) : 0;
 }
+// 1-D gradient noise with quintic fade, gradients uniform in [-1, 1]: |n(x)| <= 1/2.
 double GradientNoise1(double x) {
   if (!(std::abs(x) < 0x1p52)) return 0;  // no fraction left: the noise is 0 at lattice points
   const double i = std::floor(x), f = x - i;
