@@ -174,12 +174,6 @@ TEST(DatasetIo, RefusesFilesWithoutMetadataChecksums) {
   ExpectBadInput(path, "superblock version 0");
 }
 
-}  // namespace
-}  // namespace btf
-
-namespace btf {
-namespace {
-
 // Limits (docs/errors.md): a header claiming ~10^12 texels per image is refused before anything
 // is allocated, naming the limit and how to raise it. The file itself is small: HDF5 allocates
 // chunks only when they are written.
