@@ -114,7 +114,11 @@ void BM_PcaView(benchmark::State& st) {
   btf::CompressOptions o;
   o.components = 16;
   btf::CompressSummary s;
-  for (auto _ : st) PcaCodec() = std::make_unique<btf::Codec>(btf::Compress(d, o, {}, &s));
+  const auto source = btf::MemorySource(d);
+  for (auto _ : st) {
+    PcaCodec() = std::make_unique<btf::Codec>();
+    s = btf::Compress(o, *source, PcaCodec().get());
+  }
   SetSizeCounters(st);
   double decompose = 0;
   for (const auto& [name, sec] : s.times.phases())
@@ -132,7 +136,7 @@ void BM_PcaView(benchmark::State& st) {
 }
 BENCHMARK(BM_PcaView)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 
-// Straightforward reference: full SVD (BDCSVD) of every centred slot, first 16 components. Run on
+// Straightforward reference: full SVD (BDCSVD) of every centered slot, first 16 components. Run on
 // the first `slots` view slots only (it is slow); the ratio is per slot.
 void BM_PcaViewFullSvdReference(benchmark::State& st) {
   const auto& d = Data();
@@ -165,7 +169,11 @@ void BM_Lpca(benchmark::State& st) {
   o.components = 8;
   o.max_iterations = static_cast<int>(st.range(0));
   btf::CompressSummary s;
-  for (auto _ : st) LpcaCodec() = std::make_unique<btf::Codec>(btf::Compress(d, o, {}, &s));
+  const auto source = btf::MemorySource(d);
+  for (auto _ : st) {
+    LpcaCodec() = std::make_unique<btf::Codec>();
+    s = btf::Compress(o, *source, LpcaCodec().get());
+  }
   SetSizeCounters(st);
   for (const auto& [name, sec] : s.times.phases()) st.counters[name + "_s"] = sec;
   st.counters["rounds"] = double(s.iteration_errors.size());
@@ -200,7 +208,7 @@ void BM_LpcaReassignKernel(benchmark::State& st) {
 BENCHMARK(BM_LpcaReassignKernel)->Unit(benchmark::kMillisecond)->MinTime(1.0)->UseRealTime();
 
 // Straightforward reference: plain Lloyd k-means on the ABRDFs (explicit distance loops, random
-// initial centres, at most 10 rounds) then a full SVD per cluster (8 components).
+// initial centers, at most 10 rounds) then a full SVD per cluster (8 components).
 void BM_LpcaLloydReference(benchmark::State& st) {
   const auto& d = Data();
   const std::size_t N = d.num_texels(), dim = d.abrdf_size();
@@ -215,8 +223,8 @@ void BM_LpcaLloydReference(benchmark::State& st) {
   int rounds = 0;
   for (auto _ : st) {
     std::mt19937_64 rng(1);
-    RowMatrixXf centres(K, static_cast<Eigen::Index>(dim));
-    for (int k = 0; k < K; ++k) centres.row(k) = A.row(static_cast<Eigen::Index>(rng() % N));
+    RowMatrixXf centers(K, static_cast<Eigen::Index>(dim));
+    for (int k = 0; k < K; ++k) centers.row(k) = A.row(static_cast<Eigen::Index>(rng() % N));
     std::vector<int> assign(N, -1);
     for (rounds = 0; rounds < 10; ++rounds) {
       bool changed = false;
@@ -227,18 +235,18 @@ void BM_LpcaLloydReference(benchmark::State& st) {
         for (int k = 0; k < K; ++k) {
           float s = 0;
           for (std::size_t j = 0; j < dim; ++j) {
-            const float e = A(i, Eigen::Index(j)) - centres(k, Eigen::Index(j));
+            const float e = A(i, Eigen::Index(j)) - centers(k, Eigen::Index(j));
             s += e * e;
           }
           if (s < best) best = s, arg = k;
         }
         if (assign[i] != arg) changed = true, assign[i] = arg;
       }
-      centres.setZero();
+      centers.setZero();
       std::vector<int> count(K, 0);
-      for (std::size_t i = 0; i < N; ++i) centres.row(assign[i]) += A.row(Eigen::Index(i)), ++count[assign[i]];
+      for (std::size_t i = 0; i < N; ++i) centers.row(assign[i]) += A.row(Eigen::Index(i)), ++count[assign[i]];
       for (int k = 0; k < K; ++k)
-        if (count[k]) centres.row(k) /= float(count[k]);
+        if (count[k]) centers.row(k) /= float(count[k]);
       if (!changed) break;
     }
     residual = 0;

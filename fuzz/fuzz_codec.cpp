@@ -4,7 +4,7 @@
 // reshapes or overwrites some of their items and attributes before ReadCodec reads the result,
 // so the fuzzer explores our validation rather than HDF5's checksum rejection. Whatever the
 // reader accepts must decode every view slot and an ABRDF without touching memory it does not
-// own (ASan) or undefined behaviour (UBSan).
+// own (ASan) or undefined behavior (UBSan).
 #include <hdf5.h>
 
 #include <cmath>
@@ -149,8 +149,11 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
   lpca.log_transform = true;
   base_paths[0] = dir + "/pca.h5";
   base_paths[1] = dir + "/lpca.h5";
-  btf::WriteCodec(base_paths[0], btf::Compress(d, pca));
-  btf::WriteCodec(base_paths[1], btf::Compress(d, lpca));
+  btf::Codec codec;
+  btf::Compress(pca, *btf::MemorySource(d), &codec);
+  btf::WriteCodec(base_paths[0], codec);
+  btf::Compress(lpca, *btf::MemorySource(d), &codec);
+  btf::WriteCodec(base_paths[1], codec);
   return 0;
 }
 

@@ -33,6 +33,15 @@ void CompressOptions::Check() const {
   BTF_CHECK_OPTION(gram_limit >= 1, "gram_limit", "must be >= 1");
 }
 
+nlohmann::json CompressOptions::ToJson() const {
+  return {{"method", MethodName(method)},   {"components", components},
+          {"clusters", clusters},           {"target_error", target_error},
+          {"retained_energy", retained_energy}, {"seed", seed},
+          {"log_transform", log_transform}, {"log_epsilon", log_epsilon},
+          {"max_iterations", max_iterations}, {"min_improvement", min_improvement},
+          {"gram_limit", gram_limit}};
+}
+
 nlohmann::json CompressSummary::ToJson() const {
   nlohmann::json j;
   j["method"] = method;
@@ -66,8 +75,33 @@ nlohmann::json CompressSummary::ToJson() const {
                   {"error_on_used_directions", relative_error}};
   }
   j["seconds"] = times.ToJson();
-  j["seconds_total"] = times.Total();
   return j;
+}
+
+std::string CompressSummary::Report() const {
+  std::string r = fmt::format("{} ({})\n", input, method);
+  r += fmt::format("  shape                 {} views x {} lights x {} x {} texels x {} channels\n", views, lights, width,
+                   height, channels);
+  if (method == "lpca")
+    r += fmt::format("  clusters x components {} x {} (max per cluster)\n", clusters, components);
+  else
+    r += fmt::format("  components            {} (max per view slot)\n", components);
+  r += fmt::format("  codec size            {} (coefficients)\n", FormatBytes(codec_bytes));
+  r += fmt::format("  ratio                 {:.2f}:1 vs float32 raw ({}), {:.2f}:1 vs half raw ({})\n", ratio_float32,
+                   FormatBytes(raw_float32_bytes), ratio_half, FormatBytes(raw_half_bytes));
+  r += fmt::format("  RMSE                  {:.6g}\n", rmse);
+  r += fmt::format("  relative error        {:.6g} (||decoded - input|| / ||input||)\n", relative_error);
+  r += fmt::format("  PSNR                  {:.2f} dB (peak = {} = {:.6g})\n", psnr_db, psnr_peak_definition, psnr_peak);
+  if (method == "lpca")
+    r += fmt::format("  iteration errors      {:.5f}\n", fmt::join(iteration_errors, " "));
+  if (scene_used)
+    r += fmt::format("  scene                 kept {}/{} views, {}/{} lights; full codec {} -> saved {}; error on used "
+                     "directions {:.6g}\n",
+                     views, input_views, lights, input_lights, FormatBytes(full_codec_bytes), FormatBytes(bytes_saved),
+                     relative_error);
+  r += fmt::format("  time                  {}\n", times.Report());
+  for (const auto& w : warnings) r += fmt::format("  warning               {}\n", w);
+  return r;
 }
 
 Codec CodecBuilder::Make(CodecMethod method, Sampling views, Sampling lights, int height, int width, int channels,
@@ -234,7 +268,7 @@ void Codec::Value(const Vec2& uv, const Vec3& wi, const Vec3& wo, float* out, Uv
   if (!uv.allFinite() || !wi.allFinite() || !wo.allFinite() || wi.norm() == 0 || wo.norm() == 0)
     ThrowUsage("Codec::Value needs finite uv and non-zero finite directions");
   const Interpolant iv = views_.Barycentric(wo), il = lights_.Barycentric(wi);
-  // Texel taps: continuous texel coordinates (texel centres at integers), wrapped.
+  // Texel taps: continuous texel coordinates (texel centers at integers), wrapped.
   struct Tap {
     std::size_t texel;
     double weight;

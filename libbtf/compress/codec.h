@@ -3,7 +3,7 @@
 // in Schneider 2004 section 3), their file format "libbtf-codec" (docs/format.md) and decoders.
 //
 // Stable public API (btf-eval and btf-compress code against it):
-//   Compress / CompressFile      dataset (memory or file, streamed) + CompressOptions -> Codec
+//   Compress                     CompressOptions + view-slot source (memory or file) -> Codec
 //   WriteCodec / ReadCodec       codec file I/O (atomic write; versioned like the dataset format)
 //   Codec::Decode*               whole BTF, one view slot, one image, one texel ABRDF, one value
 //   Codec::StoredBytes, RawBytes sizes; Codec::views()/lights() the samplings
@@ -21,6 +21,7 @@
 #include "libbtf/core/dataset.h"
 #include "libbtf/core/progress.h"
 #include "libbtf/core/timer.h"
+#include "libbtf/io/slot_source.h"
 
 namespace btf {
 
@@ -50,19 +51,21 @@ struct CompressOptions {
   // If > 0: the smallest c (<= components) whose relative RMS error ||X - X'|| / ||X|| (in the
   // transformed domain) is <= target_error, chosen per slot / per cluster.
   double target_error = 0;
-  // If > 0 (and < 1): the smallest c retaining this fraction of the centred variance.
+  // If > 0 (and < 1): the smallest c retaining this fraction of the centered variance.
   double retained_energy = 0;
-  std::uint64_t seed = 1;  // k-means++ seeding and randomised SVD (deterministic for a seed)
+  std::uint64_t seed = 1;  // k-means++ seeding and randomized SVD (deterministic for a seed)
   bool log_transform = false;
   double log_epsilon = 1e-3;  // epsilon of the log transform, in data units (1/sr)
   int max_iterations = 20;    // LPCA: PCA/reassignment rounds at most
   // LPCA stops when an iteration improves the relative error by less than this fraction.
   double min_improvement = 1e-3;
   // Decomposition choice: Gram matrix of the smaller side (double) when min(n, d) <= this,
-  // randomised SVD (c + 10 oversampling, 2 power iterations) otherwise.
+  // randomized SVD (c + 10 oversampling, 2 power iterations) otherwise.
   int gram_limit = 1024;
   std::optional<SceneSpec> scene;  // keep only what a scene needs (scene.h)
   void Check() const;
+  // The options as stored in a codec's provenance (the scene separately).
+  nlohmann::json ToJson() const;
 };
 
 struct CompressSummary {
@@ -88,6 +91,7 @@ struct CompressSummary {
   std::uint64_t full_codec_bytes = 0, bytes_saved = 0;
   PhaseTimes times;
   nlohmann::json ToJson() const;
+  std::string Report() const;  // what btf-compress prints
 };
 
 // Per-view PCA of one view slot: the lights' images (H*W*C vectors) are the observations.
@@ -181,13 +185,12 @@ class CodecBuilder {
   static nlohmann::json& provenance(Codec& c) { return c.provenance_; }
 };
 
-// Compresses an in-memory dataset. NaN/Inf anywhere gives btf::Error (bad input) naming the item.
-Codec Compress(const Dataset& dataset, const CompressOptions& options, const Reporter& reporter = {},
-               CompressSummary* summary = nullptr);
-// Compresses a dataset file. pca-view streams it view slot by view slot (memory: about three
-// view slots); lpca reads it slot by slot into a texel-major matrix (memory: the BTF once).
-Codec CompressFile(const std::filesystem::path& dataset_path, const CompressOptions& options,
-                   const Reporter& reporter = {}, CompressSummary* summary = nullptr);
+// Compresses `input` (an in-memory dataset through MemorySource, a file through
+// OpenDatasetSource, ...) into *codec. pca-view reads it view slot by view slot (memory: about
+// three view slots); lpca reads it slot by slot into a texel-major matrix (memory: the BTF once).
+// NaN/Inf anywhere gives btf::Error (bad input) naming the item.
+CompressSummary Compress(const CompressOptions& options, const SlotSource& input, Codec* codec,
+                         const Reporter& reporter = {});
 
 // Codec files ("libbtf-codec" 1.0.0, docs/format.md). Written atomically.
 void WriteCodec(const std::filesystem::path& path, const Codec& codec, const std::string& creator = "libbtf");
@@ -196,7 +199,19 @@ void WriteCodec(AtomicOutput& out, const Codec& codec, const std::string& creato
 // Refuses other formats, newer major versions, missing items and inconsistent shapes (bad input).
 Codec ReadCodec(const std::filesystem::path& path);
 
-// Decodes a codec file into a dataset file, view slot by view slot (atomic).
-void DecodeToDatasetFile(const Codec& codec, const std::filesystem::path& path, const Reporter& reporter = {});
+struct DecodeSummary {
+  std::string output;
+  std::string method;
+  std::uint64_t bytes_decoded = 0;  // float32 values written
+  PhaseTimes times;                 // decode (decode + write, interleaved per view slot)
+  nlohmann::json ToJson() const;
+  std::string Report() const;
+};
+
+// Decodes a codec into a dataset file, view slot by view slot (atomic).
+DecodeSummary DecodeToDatasetFile(const Codec& codec, const std::filesystem::path& path, const Reporter& reporter = {});
+
+// "1.23 MiB" etc., for text reports.
+std::string FormatBytes(std::uint64_t bytes);
 
 }  // namespace btf

@@ -193,7 +193,23 @@ Codec ReadCodec(const std::filesystem::path& path) {
   return c;
 }
 
-void DecodeToDatasetFile(const Codec& codec, const std::filesystem::path& path, const Reporter& reporter) {
+nlohmann::json DecodeSummary::ToJson() const {
+  return {{"output", output}, {"method", method}, {"bytes_decoded", bytes_decoded}, {"seconds", times.ToJson()}};
+}
+
+std::string DecodeSummary::Report() const {
+  return fmt::format("-> {} ({} decoded in {:.2f} s)\n", output, FormatBytes(bytes_decoded), times.Total());
+}
+
+std::string FormatBytes(std::uint64_t b) {
+  if (b >= (1ull << 30)) return fmt::format("{:.2f} GiB", double(b) / (1ull << 30));
+  if (b >= (1ull << 20)) return fmt::format("{:.2f} MiB", double(b) / (1ull << 20));
+  if (b >= (1ull << 10)) return fmt::format("{:.1f} KiB", double(b) / (1ull << 10));
+  return fmt::format("{} B", b);
+}
+
+DecodeSummary DecodeToDatasetFile(const Codec& codec, const std::filesystem::path& path, const Reporter& reporter) {
+  Timer timer;
   DatasetInfo info = codec.info();
   info.provenance["decoded_from"] = {{"format", kCodecFormat}, {"method", MethodName(codec.method())}};
   DatasetWriter w(path, codec.views(), codec.lights(), codec.height(), codec.width(), codec.channels(), info,
@@ -206,6 +222,12 @@ void DecodeToDatasetFile(const Codec& codec, const std::filesystem::path& path, 
   }
   reporter.Progress(std::size_t(codec.num_views()), std::size_t(codec.num_views()), "decode");
   w.Commit();
+  DecodeSummary s;
+  s.output = path.string();
+  s.method = MethodName(codec.method());
+  s.bytes_decoded = codec.RawBytes(4);
+  s.times.Add("decode", timer.Seconds());
+  return s;
 }
 
 }  // namespace btf

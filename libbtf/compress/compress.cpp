@@ -13,134 +13,106 @@
 #include "libbtf/compress/codec.h"
 #include "libbtf/compress/pca.h"
 #include "libbtf/core/error.h"
-#include "libbtf/io/dataset_io.h"
+#include "libbtf/core/error_stats.h"
+#include "libbtf/io/slot_source.h"
 
 namespace btf {
 
 namespace {
 
-// A BTF read one view slot (L x H x W x C floats) at a time.
-struct SlotInput {
-  std::string name;
-  Sampling views, lights;
-  int height = 0, width = 0, channels = 0;
-  DatasetInfo info;
-  std::function<void(int, float*)> read;
-  std::size_t image_size() const { return std::size_t(height) * width * channels; }
-  std::size_t slot_size() const { return image_size() * lights.size(); }
-};
-
 // Keeps only what the scene uses: view/light subsets, a mip level (box filter over 2^m x 2^m
 // texels; trailing rows/columns that do not fill a block are dropped), a channel subset.
-SlotInput ApplyScene(const SlotInput& in, const SceneSpec& scene) {
-  const std::vector<int> vi = NeededDirections(in.views, scene.views), li = NeededDirections(in.lights, scene.lights);
-  std::vector<int> ci;
-  if (scene.channels.empty()) {
-    ci.resize(static_cast<std::size_t>(in.channels));
-    std::iota(ci.begin(), ci.end(), 0);
-  } else {
-    for (const auto& name : scene.channels) {
-      const auto it = std::find(in.info.channel_names.begin(), in.info.channel_names.end(), name);
-      if (it == in.info.channel_names.end())
-        ThrowBadInput("scene names channel '{}', which '{}' does not have (channels: {})", name, in.name,
-                      fmt::join(in.info.channel_names, ","));
-      ci.push_back(static_cast<int>(it - in.info.channel_names.begin()));
+class SceneSlotSource final : public SlotSource {
+ public:
+  SceneSlotSource(const SlotSource& in, const SceneSpec& scene)
+      : in_(in),
+        view_index_(NeededDirections(in.views(), scene.views)),
+        light_index_(NeededDirections(in.lights(), scene.lights)),
+        block_(1 << scene.mip_level) {
+    const DatasetInfo in_info = in.info();
+    if (scene.channels.empty()) {
+      channel_index_.resize(static_cast<std::size_t>(in.channels()));
+      std::iota(channel_index_.begin(), channel_index_.end(), 0);
+    } else {
+      for (const auto& name : scene.channels) {
+        const auto it = std::find(in_info.channel_names.begin(), in_info.channel_names.end(), name);
+        if (it == in_info.channel_names.end())
+          ThrowBadInput("scene names channel '{}', which '{}' does not have (channels: {})", name, in.name(),
+                        fmt::join(in_info.channel_names, ","));
+        channel_index_.push_back(static_cast<int>(it - in_info.channel_names.begin()));
+      }
     }
+    if (in.height() < block_ || in.width() < block_)
+      ThrowBadInput("scene mip level {} needs at least {} x {} texels; '{}' has {} x {}", scene.mip_level, block_,
+                    block_, in.name(), in.width(), in.height());
+    views_ = in.views().Subset(view_index_);
+    lights_ = in.lights().Subset(light_index_);
+    info_ = in_info;
+    info_.channel_names.clear();
+    for (int c : channel_index_) info_.channel_names.push_back(in_info.channel_names[static_cast<std::size_t>(c)]);
+    info_.texel_size_mm = in_info.texel_size_mm * block_;
   }
-  const int b = 1 << scene.mip_level;
-  if (in.height < b || in.width < b)
-    ThrowBadInput("scene mip level {} needs at least {} x {} texels; '{}' has {} x {}", scene.mip_level, b, b, in.name,
-                  in.width, in.height);
-  SlotInput out;
-  out.name = in.name;
-  out.views = in.views.Subset(vi);
-  out.lights = in.lights.Subset(li);
-  out.height = in.height / b;
-  out.width = in.width / b;
-  out.channels = static_cast<int>(ci.size());
-  out.info = in.info;
-  out.info.channel_names.clear();
-  for (int c : ci) out.info.channel_names.push_back(in.info.channel_names[static_cast<std::size_t>(c)]);
-  out.info.texel_size_mm = in.info.texel_size_mm * b;
-  const int H = out.height, W = out.width, C = out.channels, iW = in.width, iC = in.channels, iH = in.height;
-  const std::size_t in_slot = in.slot_size();
-  const SlotInput src = in;
-  out.read = [src, vi, li, ci, b, H, W, C, iW, iC, iH, in_slot](int v, float* dst) {
-    std::vector<float> buf(in_slot);
-    src.read(vi[static_cast<std::size_t>(v)], buf.data());
+  const std::string& name() const override { return in_.name(); }
+  std::string kind() const override { return in_.kind(); }
+  const Sampling& views() const override { return views_; }
+  const Sampling& lights() const override { return lights_; }
+  int height() const override { return in_.height() / block_; }
+  int width() const override { return in_.width() / block_; }
+  int channels() const override { return static_cast<int>(channel_index_.size()); }
+  DatasetInfo info() const override { return info_; }
+  void ReadViewSlot(int v, float* dst) const override {
+    std::vector<float> buf(in_.slot_size());
+    in_.ReadViewSlot(view_index_[static_cast<std::size_t>(v)], buf.data());
+    const int b = block_, H = height(), W = width(), C = channels(), iW = in_.width(), iC = in_.channels();
     const double norm = 1.0 / (double(b) * b);
-    for (std::size_t l = 0; l < li.size(); ++l) {
-      const float* img = &buf[std::size_t(li[l]) * iH * iW * iC];
+    for (std::size_t l = 0; l < light_index_.size(); ++l) {
+      const float* img = &buf[std::size_t(light_index_[l]) * in_.image_size()];
       for (int y = 0; y < H; ++y)
         for (int x = 0; x < W; ++x)
           for (int c = 0; c < C; ++c) {
             double s = 0;
             for (int dy = 0; dy < b; ++dy)
               for (int dx = 0; dx < b; ++dx)
-                s += img[(std::size_t(y * b + dy) * iW + (x * b + dx)) * iC + ci[static_cast<std::size_t>(c)]];
+                s += img[(std::size_t(y * b + dy) * iW + (x * b + dx)) * iC +
+                         channel_index_[static_cast<std::size_t>(c)]];
             dst[((l * H + y) * std::size_t(W) + x) * C + c] = static_cast<float>(s * norm);
           }
     }
-  };
-  return out;
-}
+  }
 
-void CheckFinite(const SlotInput& in, int v, const float* slot) {
-  const std::size_t n = in.slot_size();
-  for (std::size_t i = 0; i < n; ++i)
-    if (!std::isfinite(slot[i])) {
-      const std::size_t c = i % in.channels, t = i / in.channels, x = t % in.width, y = (t / in.width) % in.height,
-                        l = t / (std::size_t(in.width) * in.height);
-      ThrowBadInput("'{}' holds {} at view {}, light {}, texel (x {}, y {}), channel {}: clean the data before compressing",
-                    in.name, slot[i], v, l, x, y, c);
-    }
-}
+ private:
+  const SlotSource& in_;
+  std::vector<int> view_index_, light_index_, channel_index_;
+  int block_;
+  Sampling views_, lights_;
+  DatasetInfo info_;
+};
 
 struct Transform {
   bool log = false;
   double eps = 0;
   // Transforms in place; refuses values the log cannot take.
-  void Apply(const SlotInput& in, int v, float* data, std::size_t n) const {
+  void Apply(const SlotSource& in, int v, float* data, std::size_t n) const {
     if (!log) return;
     for (std::size_t i = 0; i < n; ++i) {
       if (!(data[i] > -eps))
         ThrowBadInput("'{}' view {}: value {} is <= -epsilon ({}), outside the log transform's domain; raise "
                       "--log-epsilon or drop --log",
-                      in.name, v, data[i], eps);
+                      in.name(), v, data[i], eps);
       data[i] = static_cast<float>(std::log(double(data[i]) + eps));
     }
   }
   float Invert(float y) const { return log ? static_cast<float>(std::exp(double(y)) - eps) : y; }
 };
 
-// Error accumulators in the original domain.
-struct ErrorAccumulator {
-  double sse = 0, energy = 0, max_abs = 0, peak = 0;
-  std::uint64_t count = 0;
-  void Add(const float* ref, const float* test, std::size_t n) {
-    double s = 0, e = 0, m = 0, p = 0;
-#pragma omp parallel for reduction(+ : s, e) reduction(max : m, p)
-    for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(n); ++i) {
-      const double d = double(test[i]) - ref[i];
-      s += d * d;
-      e += double(ref[i]) * ref[i];
-      m = std::max(m, std::abs(d));
-      p = std::max(p, std::abs(double(ref[i])));
-    }
-    sse += s, energy += e, max_abs = std::max(max_abs, m), peak = std::max(peak, p), count += n;
-  }
-  void Merge(const ErrorAccumulator& o) {
-    sse += o.sse, energy += o.energy, max_abs = std::max(max_abs, o.max_abs), peak = std::max(peak, o.peak);
-    count += o.count;
-  }
-  void Fill(CompressSummary& s) const {
-    s.rmse = count ? std::sqrt(sse / double(count)) : 0;
-    s.relative_error = energy > 0 ? std::sqrt(sse / energy) : 0;
-    s.max_abs_error = max_abs;
-    s.psnr_peak = peak;
-    s.psnr_db = s.rmse > 0 && peak > 0 ? 20 * std::log10(peak / s.rmse) : std::numeric_limits<double>::infinity();
-  }
-};
+// Errors in the original domain (the summary's definitions are ErrorStats').
+void FillErrors(const ErrorStats& e, CompressSummary& s) {
+  s.rmse = e.Rmse();
+  s.relative_error = e.RelativeL2().value_or(0.0);
+  s.max_abs_error = e.max_abs_error;
+  s.psnr_peak = e.max_abs_reference;
+  s.psnr_db = e.PsnrDb(e.max_abs_reference).value_or(std::numeric_limits<double>::infinity());
+}
 
 PcaRequest MakeRequest(const CompressOptions& o, std::uint64_t seed_offset) {
   PcaRequest q;
@@ -155,10 +127,33 @@ PcaRequest MakeRequest(const CompressOptions& o, std::uint64_t seed_offset) {
 // ---------------------------------------------------------------------------------------------
 // Per-view PCA (Sattler et al. 2003, section 4.1): per view slot, the light images are the
 // observations; eigen-normtextures over texels, weights per light.
-void CompressPcaView(const SlotInput& in, const CompressOptions& o, const Transform& tr, Codec& codec,
-                     CompressSummary& sum, const Reporter& rep) {
-  const int V = in.views.size(), L = in.lights.size();
+
+// Decomposes one view slot into `slot`; returns the errors of its reconstruction.
+ErrorStats CompressViewSlot(const SlotSource& in, int v, const std::vector<float>& raw, const CompressOptions& o,
+                            const Transform& tr, const Codec& codec, PcaViewSlot& slot, int* dropped) {
+  const int L = in.lights().size();
   const std::size_t D = in.image_size(), n = in.slot_size();
+  CheckFiniteSlot(in, v, raw.data());
+  std::vector<float> X(raw);
+  tr.Apply(in, v, X.data(), n);
+  const Eigen::Map<const RowMatrixXf> xm(X.data(), L, static_cast<Eigen::Index>(D));
+  PcaResult r = Pca(xm, MakeRequest(o, std::uint64_t(v)));
+  *dropped = r.dropped_null;
+  slot.components = r.components();
+  slot.mean.assign(r.mean.data(), r.mean.data() + D);
+  slot.basis.assign(r.basis.data(), r.basis.data() + r.basis.size());
+  slot.weights.assign(r.scores.data(), r.scores.data() + r.scores.size());
+  slot.eigenvalues = r.eigenvalues;
+  codec.DecodeViewSlot(v, X.data());  // reconstruction, for the errors
+  ErrorStats e;
+  e.Add(raw.data(), X.data(), n);
+  return e;
+}
+
+void CompressPcaView(const SlotSource& in, const CompressOptions& o, const Transform& tr, Codec& codec,
+                     CompressSummary& sum, const Reporter& rep) {
+  const int V = in.views().size(), L = in.lights().size();
+  const std::size_t n = in.slot_size();
   auto& slots = CodecBuilder::slots(codec);
   slots.resize(static_cast<std::size_t>(V));
   if (o.components > L - 1) {
@@ -167,10 +162,8 @@ void CompressPcaView(const SlotInput& in, const CompressOptions& o, const Transf
                                        o.components, std::max(L - 1, 0), L, std::max(L - 1, 0)));
     rep.Warn("{}", sum.warnings.back());
   }
-  ErrorAccumulator err;
+  ErrorStats err;
   Timer t;
-  // Reads the next slot on another thread while this one is decomposed (HDF5 is only ever
-  // called from one thread at a time).
   // Slots are decomposed P at a time, one per thread (coarse-grained parallelism: no barrier
   // per small GEMM, robust when the cores are shared), while the next P slots are read on
   // another thread (HDF5 is only ever called from one thread at a time).
@@ -179,7 +172,7 @@ void CompressPcaView(const SlotInput& in, const CompressOptions& o, const Transf
     std::vector<std::vector<float>> batch;
     for (int v = first; v < std::min(V, first + P); ++v) {
       batch.emplace_back(n);
-      in.read(v, batch.back().data());
+      in.ReadViewSlot(v, batch.back().data());
     }
     return batch;
   };
@@ -193,35 +186,22 @@ void CompressPcaView(const SlotInput& in, const CompressOptions& o, const Transf
     sum.times.Add("read", t.Seconds());
     t.Restart();
     const int count = static_cast<int>(raw.size());
-    std::vector<ErrorAccumulator> errs(static_cast<std::size_t>(count));
+    std::vector<ErrorStats> errs(static_cast<std::size_t>(count));
     std::vector<std::exception_ptr> failures(static_cast<std::size_t>(count));
     std::vector<int> drops(static_cast<std::size_t>(count), 0);
 #pragma omp parallel for schedule(static, 1) num_threads(count)
     for (int b = 0; b < count; ++b) {
-      const int v = first + b;
+      const std::size_t i = static_cast<std::size_t>(b);
       try {
-        const std::vector<float>& r0 = raw[static_cast<std::size_t>(b)];
-        CheckFinite(in, v, r0.data());
-        std::vector<float> X(r0);
-        tr.Apply(in, v, X.data(), n);
-        const Eigen::Map<const RowMatrixXf> xm(X.data(), L, static_cast<Eigen::Index>(D));
-        PcaResult r = Pca(xm, MakeRequest(o, std::uint64_t(v)));
-        drops[static_cast<std::size_t>(b)] = r.dropped_null;
-        PcaViewSlot& s = slots[static_cast<std::size_t>(v)];
-        s.components = r.components();
-        s.mean.assign(r.mean.data(), r.mean.data() + D);
-        s.basis.assign(r.basis.data(), r.basis.data() + r.basis.size());
-        s.weights.assign(r.scores.data(), r.scores.data() + r.scores.size());
-        s.eigenvalues = r.eigenvalues;
-        codec.DecodeViewSlot(v, X.data());  // reconstruction, for the errors
-        errs[static_cast<std::size_t>(b)].Add(r0.data(), X.data(), n);
+        errs[i] = CompressViewSlot(in, first + b, raw[i], o, tr, codec, slots[static_cast<std::size_t>(first + b)],
+                                   &drops[i]);
       } catch (...) {
-        failures[static_cast<std::size_t>(b)] = std::current_exception();
+        failures[i] = std::current_exception();
       }
     }
     for (const auto& f : failures)
       if (f) std::rethrow_exception(f);
-    for (int b = 0; b < count; ++b) {
+    for (int b = 0; b < count; ++b) {  // merged in slot order: sums independent of the thread count
       err.Merge(errs[static_cast<std::size_t>(b)]);
       dropped += drops[static_cast<std::size_t>(b)];
       sum.slot_components.push_back(slots[static_cast<std::size_t>(first + b)].components);
@@ -233,71 +213,117 @@ void CompressPcaView(const SlotInput& in, const CompressOptions& o, const Transf
     sum.warnings.push_back(fmt::format("{} components with ~0 eigenvalue dropped (rank-deficient or constant slots)", dropped));
     rep.Info("{}", sum.warnings.back());
   }
-  err.Fill(sum);
+  FillErrors(err, sum);
 }
 
 // ---------------------------------------------------------------------------------------------
-// Local PCA (Mueller et al. 2003 as in Schneider 2004 section 3).
+// Local PCA (Mueller et al. 2003 as in Schneider 2004 section 3): k-means++ seeding, then rounds
+// of per-cluster PCA and reassignment of every texel to the cluster that reconstructs it best.
 struct ClusterFit {
   std::vector<PcaResult> pca;           // per cluster
   std::vector<std::int32_t> assign;     // per texel
   double error = 0;                     // relative error (transformed domain)
 };
 
-void CompressLpca(const SlotInput& in, const CompressOptions& o, const Transform& tr, Codec& codec,
-                  CompressSummary& sum, const Reporter& rep) {
-  const int V = in.views.size(), L = in.lights.size(), C = in.channels;
-  const std::size_t N = std::size_t(in.height) * in.width, d = std::size_t(V) * L * C;
-  CheckAllocation(4.0 * double(N) * double(d), fmt::format("texel-major copy of '{}' for LPCA", in.name));
-  Timer t;
-  // Texel-major matrix A (N x d), transformed.
-  RowMatrixXf A(static_cast<Eigen::Index>(N), static_cast<Eigen::Index>(d));
-  {
-    std::vector<float> slot(in.slot_size());
+class LpcaCompressor {
+ public:
+  LpcaCompressor(const SlotSource& in, const CompressOptions& o, const Transform& tr, CompressSummary& sum,
+                 const Reporter& rep)
+      : in_(in), o_(o), tr_(tr), sum_(sum), rep_(rep),
+        N_(std::size_t(in.height()) * in.width()),
+        d_(std::size_t(in.views().size()) * in.lights().size() * in.channels()) {}
+
+  void Run(Codec& codec) {
+    Timer t;
+    ReadTexelMajor();
+    sum_.times.Add("read", t.Seconds());
+    t.Restart();
+    ClusterFit fit = InitialClustering();
+    sum_.times.Add("cluster", t.Seconds());
+    t.Restart();
+    Iterate(fit);
+    sum_.times.Add("iterate", t.Seconds());
+    StoreModel(fit, codec);
+    t.Restart();
+    FillErrors(MeasureErrors(in_, codec), sum_);
+    sum_.times.Add("evaluate", t.Seconds());
+  }
+
+ private:
+  static constexpr Eigen::Index kBlock = 4096;  // texels per reassignment GEMM
+
+  // Texel-major matrix A (N x d, row = one texel's ABRDF), transformed; texel norms.
+  void ReadTexelMajor() {
+    const int V = in_.views().size(), L = in_.lights().size(), C = in_.channels();
+    CheckAllocation(4.0 * double(N_) * double(d_), fmt::format("texel-major copy of '{}' for LPCA", in_.name()));
+    A_.resize(static_cast<Eigen::Index>(N_), static_cast<Eigen::Index>(d_));
+    std::vector<float> slot(in_.slot_size());
     for (int v = 0; v < V; ++v) {
-      rep.Progress(std::size_t(v), std::size_t(V), "read");
-      in.read(v, slot.data());
-      CheckFinite(in, v, slot.data());
-      tr.Apply(in, v, slot.data(), slot.size());
+      rep_.Progress(std::size_t(v), std::size_t(V), "read");
+      in_.ReadViewSlot(v, slot.data());
+      CheckFiniteSlot(in_, v, slot.data());
+      tr_.Apply(in_, v, slot.data(), slot.size());
 #pragma omp parallel for schedule(static)
-      for (std::ptrdiff_t ti = 0; ti < static_cast<std::ptrdiff_t>(N); ++ti)
+      for (std::ptrdiff_t ti = 0; ti < static_cast<std::ptrdiff_t>(N_); ++ti)
         for (int l = 0; l < L; ++l)
           for (int c = 0; c < C; ++c)
-            A(ti, (std::ptrdiff_t(v) * L + l) * C + c) = slot[(std::size_t(l) * N + std::size_t(ti)) * C + c];
+            A_(ti, (std::ptrdiff_t(v) * L + l) * C + c) = slot[(std::size_t(l) * N_ + std::size_t(ti)) * C + c];
     }
+    norms_.resize(static_cast<Eigen::Index>(N_));
+    for (Eigen::Index i = 0; i < A_.rows(); ++i) norms_[i] = A_.row(i).cast<double>().squaredNorm();
+    total_ = norms_.sum();
+    residual_.assign(N_, 0.0);
   }
-  sum.times.Add("read", t.Seconds());
-  t.Restart();
-  Eigen::VectorXd norms(static_cast<Eigen::Index>(N));
-  for (Eigen::Index i = 0; i < A.rows(); ++i) norms[i] = A.row(i).cast<double>().squaredNorm();
-  const double total = norms.sum();
 
-  int K = o.clusters;
-  if (std::size_t(K) > N) {
-    sum.warnings.push_back(fmt::format("clusters {} clamped to the number of texels {}", K, N));
-    rep.Warn("{}", sum.warnings.back());
-    K = static_cast<int>(N);
+  // k-means++ seeds on a deterministic sample of at most 8192 texels, each texel assigned to the
+  // nearest seed, then the first per-cluster PCA.
+  ClusterFit InitialClustering() {
+    K_ = o_.clusters;
+    if (std::size_t(K_) > N_) {
+      sum_.warnings.push_back(fmt::format("clusters {} clamped to the number of texels {}", K_, N_));
+      rep_.Warn("{}", sum_.warnings.back());
+      K_ = static_cast<int>(N_);
+    }
+    const RowMatrixXf centers = SeedCenters();
+    ClusterFit fit;
+    fit.assign.assign(N_, 0);
+    const Eigen::VectorXf cn = centers.rowwise().squaredNorm();
+    for (Eigen::Index b = 0; b < Eigen::Index(N_); b += kBlock) {
+      const Eigen::Index w = std::min<Eigen::Index>(kBlock, Eigen::Index(N_) - b);
+      const Eigen::MatrixXf P = A_.middleRows(b, w) * centers.transpose();
+#pragma omp parallel for schedule(static)
+      for (Eigen::Index i = 0; i < w; ++i) {
+        Eigen::Index best;
+        (cn.transpose() - 2 * P.row(i)).minCoeff(&best);
+        fit.assign[static_cast<std::size_t>(b + i)] = static_cast<std::int32_t>(best);
+      }
+    }
+    FitClusters(fit, false);
+    sum_.iteration_errors.push_back(fit.error);
+    sum_.iteration_changes.push_back(0);
+    rep_.Info("lpca: initial clustering, relative error {:.5f}", fit.error);
+    return fit;
   }
-  // k-means++ seeding on a deterministic sample of at most 8192 texels.
-  std::mt19937_64 rng(o.seed);
-  std::vector<std::size_t> sample(N);
-  std::iota(sample.begin(), sample.end(), std::size_t(0));
-  if (N > 8192) {
-    std::shuffle(sample.begin(), sample.end(), rng);
-    sample.resize(8192);
-    std::sort(sample.begin(), sample.end());
-  }
-  RowMatrixXf centres(K, static_cast<Eigen::Index>(d));
-  {
+
+  RowMatrixXf SeedCenters() {
+    std::mt19937_64 rng(o_.seed);
+    std::vector<std::size_t> sample(N_);
+    std::iota(sample.begin(), sample.end(), std::size_t(0));
+    if (N_ > 8192) {
+      std::shuffle(sample.begin(), sample.end(), rng);
+      sample.resize(8192);
+      std::sort(sample.begin(), sample.end());
+    }
+    RowMatrixXf centers(K_, static_cast<Eigen::Index>(d_));
     std::vector<double> dist(sample.size(), std::numeric_limits<double>::infinity());
     std::size_t pick = sample[std::uniform_int_distribution<std::size_t>(0, sample.size() - 1)(rng)];
-    for (int k = 0; k < K; ++k) {
-      centres.row(k) = A.row(static_cast<Eigen::Index>(pick));
+    for (int k = 0; k < K_; ++k) {
+      centers.row(k) = A_.row(static_cast<Eigen::Index>(pick));
 #pragma omp parallel for schedule(static)
       for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(sample.size()); ++i)
-        dist[i] = std::min(dist[i], (A.row(static_cast<Eigen::Index>(sample[i])) - centres.row(k)).cast<double>().squaredNorm());
+        dist[i] = std::min(dist[i], (A_.row(static_cast<Eigen::Index>(sample[i])) - centers.row(k)).cast<double>().squaredNorm());
       const double s = std::accumulate(dist.begin(), dist.end(), 0.0);
-      if (!(s > 0)) {  // fewer distinct ABRDFs than clusters: duplicate centres (clusters stay empty, re-seeded)
+      if (!(s > 0)) {  // fewer distinct ABRDFs than clusters: duplicate centers (clusters stay empty, re-seeded)
         pick = sample[std::size_t(k + 1) % sample.size()];
         continue;
       }
@@ -309,74 +335,57 @@ void CompressLpca(const SlotInput& in, const CompressOptions& o, const Transform
       }
       pick = sample[i];
     }
+    return centers;
   }
-  const Eigen::Index block = 4096;
-  ClusterFit fit;
-  fit.assign.assign(N, 0);
-  {
-    Eigen::VectorXf cn = centres.rowwise().squaredNorm();
-    for (Eigen::Index b = 0; b < Eigen::Index(N); b += block) {
-      const Eigen::Index w = std::min<Eigen::Index>(block, Eigen::Index(N) - b);
-      const Eigen::MatrixXf P = A.middleRows(b, w) * centres.transpose();
-#pragma omp parallel for schedule(static)
-      for (Eigen::Index i = 0; i < w; ++i) {
-        Eigen::Index best;
-        (cn.transpose() - 2 * P.row(i)).minCoeff(&best);
-        fit.assign[static_cast<std::size_t>(b + i)] = static_cast<std::int32_t>(best);
-      }
-    }
-  }
-  sum.times.Add("cluster", t.Seconds());
-  t.Restart();
 
-  std::vector<double> residual(N, 0.0);
   // Per-cluster PCA on the current assignment; empty clusters re-seeded from the worst texels.
-  auto fit_clusters = [&](ClusterFit& f, bool have_residuals) {
-    std::vector<std::vector<std::size_t>> members(static_cast<std::size_t>(K));
-    for (std::size_t i = 0; i < N; ++i) members[static_cast<std::size_t>(f.assign[i])].push_back(i);
+  void FitClusters(ClusterFit& f, bool have_residuals) {
+    std::vector<std::vector<std::size_t>> members(static_cast<std::size_t>(K_));
+    for (std::size_t i = 0; i < N_; ++i) members[static_cast<std::size_t>(f.assign[i])].push_back(i);
     std::vector<std::size_t> order;
     std::size_t next_worst = 0;
-    for (int k = 0; k < K; ++k) {
+    for (int k = 0; k < K_; ++k) {
       if (!members[static_cast<std::size_t>(k)].empty()) continue;
       if (order.empty()) {
-        order.resize(N);
+        order.resize(N_);
         std::iota(order.begin(), order.end(), std::size_t(0));
         if (have_residuals)
-          std::stable_sort(order.begin(), order.end(), [&](auto a, auto b) { return residual[a] > residual[b]; });
+          std::stable_sort(order.begin(), order.end(), [&](auto a, auto b) { return residual_[a] > residual_[b]; });
       }
       // Take the worst-fitted texel whose cluster can spare it.
-      while (next_worst < N && members[static_cast<std::size_t>(f.assign[order[next_worst]])].size() <= 1) ++next_worst;
-      if (next_worst == N) break;
+      while (next_worst < N_ && members[static_cast<std::size_t>(f.assign[order[next_worst]])].size() <= 1) ++next_worst;
+      if (next_worst == N_) break;
       const std::size_t i = order[next_worst++];
       auto& from = members[static_cast<std::size_t>(f.assign[i])];
       from.erase(std::find(from.begin(), from.end(), i));
       f.assign[i] = k;
       members[static_cast<std::size_t>(k)].push_back(i);
     }
-    f.pca.assign(static_cast<std::size_t>(K), PcaResult{});
+    f.pca.assign(static_cast<std::size_t>(K_), PcaResult{});
     double res = 0;
     // One cluster per thread (Eigen runs single-threaded inside a parallel region), largest first.
-    std::vector<int> order_k(static_cast<std::size_t>(K));
+    std::vector<int> order_k(static_cast<std::size_t>(K_));
     std::iota(order_k.begin(), order_k.end(), 0);
     std::stable_sort(order_k.begin(), order_k.end(), [&](int a, int b) {
       return members[static_cast<std::size_t>(a)].size() > members[static_cast<std::size_t>(b)].size();
     });
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : res)
-    for (int kk = 0; kk < K; ++kk) {
+    for (int kk = 0; kk < K_; ++kk) {
       const int k = order_k[static_cast<std::size_t>(kk)];
       const auto& m = members[static_cast<std::size_t>(k)];
       if (m.empty()) continue;
-      RowMatrixXf X(static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d));
-      for (std::size_t i = 0; i < m.size(); ++i) X.row(Eigen::Index(i)) = A.row(static_cast<Eigen::Index>(m[i]));
-      f.pca[static_cast<std::size_t>(k)] = Pca(X, MakeRequest(o, std::uint64_t(k)));
+      RowMatrixXf X(static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d_));
+      for (std::size_t i = 0; i < m.size(); ++i) X.row(Eigen::Index(i)) = A_.row(static_cast<Eigen::Index>(m[i]));
+      f.pca[static_cast<std::size_t>(k)] = Pca(X, MakeRequest(o_, std::uint64_t(k)));
       res += f.pca[static_cast<std::size_t>(k)].residual_energy;
     }
-    f.error = total > 0 ? std::sqrt(res / total) : 0;
-  };
+    f.error = total_ > 0 ? std::sqrt(res / total_) : 0;
+  }
+
   // Reassigns each texel to the cluster that reconstructs it best; returns the number moved.
-  auto reassign = [&](const ClusterFit& f, std::vector<std::int32_t>& assign) {
-    const int c = o.components;
-    RowMatrixXf big = RowMatrixXf::Zero(Eigen::Index(K) * (c + 1), static_cast<Eigen::Index>(d));
+  std::size_t Reassign(const ClusterFit& f, std::vector<std::int32_t>& assign) {
+    const int c = o_.components, K = K_;
+    RowMatrixXf big = RowMatrixXf::Zero(Eigen::Index(K) * (c + 1), static_cast<Eigen::Index>(d_));
     Eigen::VectorXd mnorm = Eigen::VectorXd::Zero(K);
     std::vector<int> ck(static_cast<std::size_t>(K), -1);
     for (int k = 0; k < K; ++k) {
@@ -394,9 +403,9 @@ void CompressLpca(const SlotInput& in, const CompressOptions& o, const Transform
       for (int j = 0; j < std::max(ck[static_cast<std::size_t>(k)], 0); ++j)
         me(k, j) = big.row(k).cast<double>().dot(big.row(K + Eigen::Index(k) * c + j).cast<double>());
     std::size_t moved = 0;
-    for (Eigen::Index b = 0; b < Eigen::Index(N); b += block) {
-      const Eigen::Index w = std::min<Eigen::Index>(block, Eigen::Index(N) - b);
-      const Eigen::MatrixXf P = A.middleRows(b, w) * big.transpose();
+    for (Eigen::Index b = 0; b < Eigen::Index(N_); b += kBlock) {
+      const Eigen::Index w = std::min<Eigen::Index>(kBlock, Eigen::Index(N_) - b);
+      const Eigen::MatrixXf P = A_.middleRows(b, w) * big.transpose();
 #pragma omp parallel for schedule(static) reduction(+ : moved)
       for (Eigen::Index i = 0; i < w; ++i) {
         const std::size_t ti = static_cast<std::size_t>(b + i);
@@ -404,126 +413,171 @@ void CompressLpca(const SlotInput& in, const CompressOptions& o, const Transform
         int arg = assign[ti];
         for (int k = 0; k < K; ++k) {
           if (ck[static_cast<std::size_t>(k)] < 0) continue;
-          double r = norms[Eigen::Index(ti)] - 2.0 * P(i, k) + mnorm[k];
+          double r = norms_[Eigen::Index(ti)] - 2.0 * P(i, k) + mnorm[k];
           for (int j = 0; j < ck[static_cast<std::size_t>(k)]; ++j) {
             const double proj = double(P(i, K + Eigen::Index(k) * c + j)) - me(k, j);
             r -= proj * proj;
           }
           if (r < best) best = r, arg = k;
         }
-        residual[ti] = std::max(best, 0.0);
+        residual_[ti] = std::max(best, 0.0);
         if (arg != assign[ti]) ++moved;
         assign[ti] = arg;
       }
     }
     return moved;
-  };
-
-  fit_clusters(fit, false);
-  sum.iteration_errors.push_back(fit.error);
-  sum.iteration_changes.push_back(0);
-  rep.Info("lpca: initial clustering, relative error {:.5f}", fit.error);
-  for (int it = 0; it < o.max_iterations; ++it) {
-    rep.Progress(std::size_t(it), std::size_t(o.max_iterations), "lpca");
-    ClusterFit next{{}, fit.assign, 0};
-    const std::size_t moved = reassign(fit, next.assign);
-    if (moved == 0) break;
-    fit_clusters(next, true);
-    sum.iteration_errors.push_back(next.error);
-    sum.iteration_changes.push_back(static_cast<int>(moved));
-    rep.Info("lpca: iteration {}: {} texels reassigned, relative error {:.5f}", it + 1, moved, next.error);
-    const bool better = next.error < fit.error;
-    const bool enough = fit.error - next.error >= o.min_improvement * fit.error;
-    if (better) fit = std::move(next);
-    if (!enough) break;
   }
-  sum.times.Add("iterate", t.Seconds());
+
+  // PCA/reassignment rounds until nothing moves, the error stops improving or max_iterations.
+  void Iterate(ClusterFit& fit) {
+    for (int it = 0; it < o_.max_iterations; ++it) {
+      rep_.Progress(std::size_t(it), std::size_t(o_.max_iterations), "lpca");
+      ClusterFit next{{}, fit.assign, 0};
+      const std::size_t moved = Reassign(fit, next.assign);
+      if (moved == 0) break;
+      FitClusters(next, true);
+      sum_.iteration_errors.push_back(next.error);
+      sum_.iteration_changes.push_back(static_cast<int>(moved));
+      rep_.Info("lpca: iteration {}: {} texels reassigned, relative error {:.5f}", it + 1, moved, next.error);
+      const bool better = next.error < fit.error;
+      const bool enough = fit.error - next.error >= o_.min_improvement * fit.error;
+      if (better) fit = std::move(next);
+      if (!enough) break;
+    }
+  }
 
   // Codec arrays; the stride is the largest component count any cluster kept.
-  LpcaModel& m = CodecBuilder::lpca(codec);
-  int c = 0;
-  for (const auto& p : fit.pca) c = std::max(c, p.components());
-  m.clusters = K;
-  m.components = c;
-  m.means.assign(std::size_t(K) * d, 0.0f);
-  m.basis.assign(std::size_t(K) * c * d, 0.0f);
-  m.cluster_components.assign(static_cast<std::size_t>(K), 0);
-  m.cluster_of = fit.assign;
-  m.weights.assign(N * c, 0.0f);
-  int small = 0, dropped = 0;
-  std::vector<std::size_t> seen(static_cast<std::size_t>(K), 0);
-  for (int k = 0; k < K; ++k) {
-    const PcaResult& p = fit.pca[static_cast<std::size_t>(k)];
-    sum.slot_components.push_back(p.components());
-    if (p.mean.size() == 0) continue;
-    if (p.clamped_to < std::min(o.components, int(d))) ++small;
-    dropped += p.dropped_null;
-    m.cluster_components[static_cast<std::size_t>(k)] = p.components();
-    std::copy(p.mean.data(), p.mean.data() + d, m.means.data() + std::size_t(k) * d);
-    std::copy(p.basis.data(), p.basis.data() + p.basis.size(), m.basis.data() + std::size_t(k) * c * d);
+  void StoreModel(const ClusterFit& fit, Codec& codec) {
+    const int K = K_;
+    LpcaModel& m = CodecBuilder::lpca(codec);
+    int c = 0;
+    for (const auto& p : fit.pca) c = std::max(c, p.components());
+    m.clusters = K;
+    m.components = c;
+    m.means.assign(std::size_t(K) * d_, 0.0f);
+    m.basis.assign(std::size_t(K) * c * d_, 0.0f);
+    m.cluster_components.assign(static_cast<std::size_t>(K), 0);
+    m.cluster_of = fit.assign;
+    m.weights.assign(N_ * c, 0.0f);
+    int small = 0, dropped = 0;
+    for (int k = 0; k < K; ++k) {
+      const PcaResult& p = fit.pca[static_cast<std::size_t>(k)];
+      sum_.slot_components.push_back(p.components());
+      if (p.mean.size() == 0) continue;
+      if (p.clamped_to < std::min(o_.components, int(d_))) ++small;
+      dropped += p.dropped_null;
+      m.cluster_components[static_cast<std::size_t>(k)] = p.components();
+      std::copy(p.mean.data(), p.mean.data() + d_, m.means.data() + std::size_t(k) * d_);
+      std::copy(p.basis.data(), p.basis.data() + p.basis.size(), m.basis.data() + std::size_t(k) * c * d_);
+    }
+    // Members are visited in texel order, as FitClusters gathered them.
+    std::vector<std::size_t> seen(static_cast<std::size_t>(K), 0);
+    for (std::size_t i = 0; i < N_; ++i) {
+      const int k = fit.assign[i];
+      const PcaResult& p = fit.pca[static_cast<std::size_t>(k)];
+      const std::size_t row = seen[static_cast<std::size_t>(k)]++;
+      for (int j = 0; j < p.components(); ++j) m.weights[i * c + j] = p.scores(Eigen::Index(row), j);
+    }
+    if (small > 0) {
+      sum_.warnings.push_back(fmt::format("{} clusters have too few texels for {} components (clamped to members - 1)",
+                                          small, o_.components));
+      rep_.Warn("{}", sum_.warnings.back());
+    }
+    if (dropped > 0) sum_.warnings.push_back(fmt::format("{} components with ~0 eigenvalue dropped", dropped));
+    sum_.clusters = K;
   }
-  // Members are visited in texel order, as fit_clusters gathered them.
-  for (std::size_t i = 0; i < N; ++i) {
-    const int k = fit.assign[i];
-    const PcaResult& p = fit.pca[static_cast<std::size_t>(k)];
-    const std::size_t row = seen[static_cast<std::size_t>(k)]++;
-    for (int j = 0; j < p.components(); ++j) m.weights[i * c + j] = p.scores(Eigen::Index(row), j);
-  }
-  if (small > 0) {
-    sum.warnings.push_back(fmt::format("{} clusters have too few texels for {} components (clamped to members - 1)",
-                                       small, o.components));
-    rep.Warn("{}", sum.warnings.back());
-  }
-  if (dropped > 0) sum.warnings.push_back(fmt::format("{} components with ~0 eigenvalue dropped", dropped));
-  sum.clusters = K;
 
-  // Errors in the original domain: decode slot by slot against the input.
-  t.Restart();
-  ErrorAccumulator err;
-  std::vector<float> ref(in.slot_size()), dec(in.slot_size());
-  for (int v = 0; v < V; ++v) {
-    in.read(v, ref.data());
-    codec.DecodeViewSlot(v, dec.data());
-    err.Add(ref.data(), dec.data(), ref.size());
+  // Errors in the original domain: decode slot by slot against the input, one image per task,
+  // merged in (view, light) order.
+  static ErrorStats MeasureErrors(const SlotSource& in, const Codec& codec) {
+    const int V = in.views().size(), L = in.lights().size();
+    const std::size_t image = in.image_size();
+    ErrorStats err;
+    std::vector<float> ref(in.slot_size()), dec(in.slot_size());
+    std::vector<ErrorStats> per_light(static_cast<std::size_t>(L));
+    for (int v = 0; v < V; ++v) {
+      in.ReadViewSlot(v, ref.data());
+      codec.DecodeViewSlot(v, dec.data());
+#pragma omp parallel for schedule(static)
+      for (int l = 0; l < L; ++l) {
+        per_light[static_cast<std::size_t>(l)] = ErrorStats();
+        per_light[static_cast<std::size_t>(l)].Add(ref.data() + l * image, dec.data() + l * image, image);
+      }
+      for (const auto& e : per_light) err.Merge(e);
+    }
+    return err;
   }
-  err.Fill(sum);
-  sum.times.Add("evaluate", t.Seconds());
+
+  const SlotSource& in_;
+  const CompressOptions& o_;
+  const Transform& tr_;
+  CompressSummary& sum_;
+  const Reporter& rep_;
+  const std::size_t N_, d_;
+  int K_ = 0;
+  RowMatrixXf A_;
+  Eigen::VectorXd norms_;
+  double total_ = 0;
+  std::vector<double> residual_;  // per texel: squared residual under its cluster (after Reassign)
+};
+
+// What the full (scene-less) input would take with the same component counts (mean per
+// slot/cluster), for the summary of a scene-reduced compression.
+std::uint64_t FullCodecBytes(const CompressSummary& sum, const Codec& codec) {
+  double cbar = 0;
+  for (int c : sum.slot_components) cbar += c;
+  cbar /= std::max<std::size_t>(sum.slot_components.size(), 1);
+  const double Vf = sum.input_views, Lf = sum.input_lights, T = double(sum.input_height) * sum.input_width,
+               Cf = sum.input_channels;
+  double values = 0;
+  if (codec.method() == CodecMethod::kPcaView) {
+    values = Vf * (T * Cf * (1 + cbar) + Lf * cbar);
+  } else {
+    const double K = codec.lpca().clusters, c = codec.lpca().components;
+    values = K * (c + 1) * Vf * Lf * Cf + T * (c + 1) + K;
+  }
+  return static_cast<std::uint64_t>(values * 4);
 }
 
-Codec CompressInput(const SlotInput& input_full, const CompressOptions& options_in, const Reporter& rep,
-                    CompressSummary* summary) {
-  options_in.Check();
-  CompressOptions o = options_in;
+}  // namespace
+
+CompressSummary Compress(const CompressOptions& options, const SlotSource& input_full, Codec* codec_out,
+                         const Reporter& rep) {
+  options.Check();
+  BTF_CHECK(codec_out != nullptr);
+  CompressOptions o = options;
   CompressSummary sum;
-  sum.input = input_full.name;
-  SlotInput in = input_full;
+  sum.input = input_full.name();
+  std::unique_ptr<SlotSource> scene_input;
   if (o.scene) {
-    in = ApplyScene(input_full, *o.scene);
+    scene_input = std::make_unique<SceneSlotSource>(input_full, *o.scene);
     if (o.scene->max_relative_error > 0 && o.target_error == 0 && o.retained_energy == 0)
       o.target_error = o.scene->max_relative_error;
     sum.scene_used = true;
-    sum.input_views = input_full.views.size();
-    sum.input_lights = input_full.lights.size();
-    sum.input_height = input_full.height;
-    sum.input_width = input_full.width;
-    sum.input_channels = input_full.channels;
-    rep.Info("scene keeps {} of {} views, {} of {} lights, {} x {} texels, {} channels", in.views.size(),
-             input_full.views.size(), in.lights.size(), input_full.lights.size(), in.width, in.height, in.channels);
+    sum.input_views = input_full.views().size();
+    sum.input_lights = input_full.lights().size();
+    sum.input_height = input_full.height();
+    sum.input_width = input_full.width();
+    sum.input_channels = input_full.channels();
+    rep.Info("scene keeps {} of {} views, {} of {} lights, {} x {} texels, {} channels", scene_input->views().size(),
+             sum.input_views, scene_input->lights().size(), sum.input_lights, scene_input->width(),
+             scene_input->height(), scene_input->channels());
   }
+  const SlotSource& in = scene_input ? *scene_input : input_full;
   const Transform tr{o.log_transform, o.log_epsilon};
-  Codec codec = CodecBuilder::Make(o.method, in.views, in.lights, in.height, in.width, in.channels, in.info,
+  Codec codec = CodecBuilder::Make(o.method, in.views(), in.lights(), in.height(), in.width(), in.channels(), in.info(),
                                    o.log_transform ? ValueTransform::kLog : ValueTransform::kNone,
                                    o.log_transform ? o.log_epsilon : 0.0);
   sum.method = MethodName(o.method);
-  sum.views = in.views.size();
-  sum.lights = in.lights.size();
-  sum.height = in.height;
-  sum.width = in.width;
-  sum.channels = in.channels;
+  sum.views = in.views().size();
+  sum.lights = in.lights().size();
+  sum.height = in.height();
+  sum.width = in.width();
+  sum.channels = in.channels();
   if (o.method == CodecMethod::kPcaView)
     CompressPcaView(in, o, tr, codec, sum, rep);
   else
-    CompressLpca(in, o, tr, codec, sum, rep);
+    LpcaCompressor(in, o, tr, sum, rep).Run(codec);
   sum.components = 0;
   for (int c : sum.slot_components) sum.components = std::max(sum.components, c);
   sum.codec_bytes = codec.StoredBytes();
@@ -532,75 +586,16 @@ Codec CompressInput(const SlotInput& input_full, const CompressOptions& options_
   sum.ratio_float32 = sum.codec_bytes ? double(sum.raw_float32_bytes) / double(sum.codec_bytes) : 0;
   sum.ratio_half = sum.codec_bytes ? double(sum.raw_half_bytes) / double(sum.codec_bytes) : 0;
   if (sum.scene_used) {
-    // What the full input would take with the same component counts (mean per slot/cluster).
-    double cbar = 0;
-    for (int c : sum.slot_components) cbar += c;
-    cbar /= std::max<std::size_t>(sum.slot_components.size(), 1);
-    const double Vf = sum.input_views, Lf = sum.input_lights, T = double(sum.input_height) * sum.input_width,
-                 Cf = sum.input_channels;
-    double values = 0;
-    if (o.method == CodecMethod::kPcaView) {
-      values = Vf * (T * Cf * (1 + cbar) + Lf * cbar);
-    } else {
-      const double K = codec.lpca().clusters, c = codec.lpca().components;
-      values = K * (c + 1) * Vf * Lf * Cf + T * (c + 1) + K;
-    }
-    sum.full_codec_bytes = static_cast<std::uint64_t>(values * 4);
+    sum.full_codec_bytes = FullCodecBytes(sum, codec);
     sum.bytes_saved = sum.full_codec_bytes > sum.codec_bytes ? sum.full_codec_bytes - sum.codec_bytes : 0;
   }
   nlohmann::json prov;
-  prov["options"] = {{"method", sum.method},
-                     {"components", o.components},
-                     {"clusters", o.clusters},
-                     {"target_error", o.target_error},
-                     {"retained_energy", o.retained_energy},
-                     {"seed", o.seed},
-                     {"log_transform", o.log_transform},
-                     {"log_epsilon", o.log_epsilon},
-                     {"max_iterations", o.max_iterations},
-                     {"min_improvement", o.min_improvement},
-                     {"gram_limit", o.gram_limit}};
+  prov["options"] = o.ToJson();
   if (o.scene) prov["scene"] = o.scene->ToJson();
   prov["summary"] = sum.ToJson();
   CodecBuilder::provenance(codec) = prov;
-  if (summary) *summary = std::move(sum);
-  return codec;
-}
-
-}  // namespace
-
-Codec Compress(const Dataset& dataset, const CompressOptions& options, const Reporter& reporter,
-               CompressSummary* summary) {
-  SlotInput in;
-  in.name = "in-memory dataset";
-  in.views = dataset.views();
-  in.lights = dataset.lights();
-  in.height = dataset.height();
-  in.width = dataset.width();
-  in.channels = dataset.channels();
-  in.info = dataset.info();
-  in.read = [&dataset](int v, float* out) {
-    const auto s = dataset.view_slot(v);
-    std::copy(s.begin(), s.end(), out);
-  };
-  return CompressInput(in, options, reporter, summary);
-}
-
-Codec CompressFile(const std::filesystem::path& dataset_path, const CompressOptions& options, const Reporter& reporter,
-                   CompressSummary* summary) {
-  options.Check();
-  auto reader = std::make_shared<DatasetReader>(dataset_path);
-  const DatasetHeader& h = reader->header();
-  SlotInput in;
-  in.name = dataset_path.string();
-  in.views = h.views;
-  in.lights = h.lights;
-  in.height = h.height;
-  in.width = h.width;
-  in.channels = h.channels;
-  in.info = h.info;
-  in.read = [reader](int v, float* out) { reader->ReadViewSlot(v, out); };
-  return CompressInput(in, options, reporter, summary);
+  *codec_out = std::move(codec);
+  return sum;
 }
 
 }  // namespace btf

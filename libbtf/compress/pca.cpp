@@ -15,8 +15,8 @@ namespace {
 using MatrixXd = Eigen::MatrixXd;
 constexpr Eigen::Index kBlock = 2048;  // columns/rows per double block (fits L2 with n <= 256)
 
-// Mean (double accumulation) and centred copy; energies in double.
-void Centre(const Eigen::Ref<const RowMatrixXf>& X, PcaResult& r, RowMatrixXf& Xc) {
+// Mean (double accumulation) and centered copy; energies in double.
+void Center(const Eigen::Ref<const RowMatrixXf>& X, PcaResult& r, RowMatrixXf& Xc) {
   const Eigen::Index n = X.rows(), d = X.cols();
   Eigen::VectorXd mean = Eigen::VectorXd::Zero(d);
   double total = 0;
@@ -29,9 +29,9 @@ void Centre(const Eigen::Ref<const RowMatrixXf>& X, PcaResult& r, RowMatrixXf& X
   r.mean = mean.cast<float>();
   r.total_energy = total;
   Xc = X.rowwise() - r.mean.transpose();
-  double centred = 0;
-  for (Eigen::Index i = 0; i < n; ++i) centred += Xc.row(i).cast<double>().squaredNorm();
-  r.centred_energy = centred;
+  double centered = 0;
+  for (Eigen::Index i = 0; i < n; ++i) centered += Xc.row(i).cast<double>().squaredNorm();
+  r.centered_energy = centered;
 }
 
 // Number of components to keep from eigenvalues sorted in decreasing order.
@@ -45,24 +45,24 @@ int ChooseComponents(const std::vector<double>& eig, const PcaRequest& q, PcaRes
   r.dropped_null = c - kept;
   c = kept;
   if (q.target_error > 0 && r.total_energy > 0) {
-    double residual = r.centred_energy;
+    double residual = r.centered_energy;
     for (int k = 0; k <= c; ++k) {
       if (std::sqrt(std::max(residual, 0.0) / r.total_energy) <= q.target_error) return k;
       if (k < c) residual -= eig[static_cast<std::size_t>(k)];
     }
-  } else if (q.retained_energy > 0 && r.centred_energy > 0) {
+  } else if (q.retained_energy > 0 && r.centered_energy > 0) {
     double captured = 0;
     for (int k = 0; k < c; ++k) {
-      if (captured >= q.retained_energy * r.centred_energy) return k;
+      if (captured >= q.retained_energy * r.centered_energy) return k;
       captured += eig[static_cast<std::size_t>(k)];
     }
   }
   return c;
 }
 
-// Orthonormalises the rows of `basis` in order (Householder QR keeps the span of every prefix),
+// Orthonormalizes the rows of `basis` in order (Householder QR keeps the span of every prefix),
 // keeping each row's sign.
-void Orthonormalise(RowMatrixXf& basis) {
+void Orthonormalize(RowMatrixXf& basis) {
   const Eigen::Index c = basis.rows(), d = basis.cols();
   if (c == 0) return;
   const MatrixXd bt = basis.transpose().cast<double>();
@@ -79,7 +79,7 @@ void BasisFromLeft(const RowMatrixXf& Xc, const MatrixXd& U, const std::vector<d
   Eigen::MatrixXf uc(U.rows(), c);
   for (int k = 0; k < c; ++k) uc.col(k) = (U.col(k) / std::sqrt(eig[static_cast<std::size_t>(k)])).cast<float>();
   r.basis.noalias() = uc.transpose() * Xc;
-  Orthonormalise(r.basis);
+  Orthonormalize(r.basis);
 }
 
 Eigen::MatrixXd Orth(const Eigen::MatrixXf& Y) {
@@ -96,7 +96,7 @@ void Finish(const RowMatrixXf& Xc, PcaResult& r) {
     r.eigenvalues[static_cast<std::size_t>(k)] = e;
     captured += e;
   }
-  r.residual_energy = std::max(0.0, r.centred_energy - captured);
+  r.residual_energy = std::max(0.0, r.centered_energy - captured);
 }
 
 }  // namespace
@@ -105,19 +105,19 @@ PcaResult Pca(const Eigen::Ref<const RowMatrixXf>& X, const PcaRequest& q) {
   PcaResult r;
   const Eigen::Index n = X.rows(), d = X.cols();
   RowMatrixXf Xc;
-  Centre(X, r, Xc);
+  Center(X, r, Xc);
   r.requested = q.max_components;
-  // n observations span at most n - 1 centred directions.
+  // n observations span at most n - 1 centered directions.
   const int limit = static_cast<int>(std::min<Eigen::Index>(n - 1, d));
   r.clamped_to = limit;
   const Eigen::Index small = std::min(n, d);
   const int want = std::min(q.max_components, limit);
   const bool gram = small <= q.gram_limit || 2 * (want + q.oversampling) >= small;
   std::vector<double> eig;
-  if (want <= 0 || r.centred_energy <= 0) {
+  if (want <= 0 || r.centered_energy <= 0) {
     r.basis.resize(0, d);
     r.scores.resize(n, 0);
-    r.residual_energy = r.centred_energy;
+    r.residual_energy = r.centered_energy;
     return r;
   }
   if (gram && n <= d) {
@@ -145,7 +145,7 @@ PcaResult Pca(const Eigen::Ref<const RowMatrixXf>& X, const PcaRequest& q) {
     r.basis.resize(c, d);
     for (int k = 0; k < c; ++k) r.basis.row(k) = es.eigenvectors().col(d - 1 - k).cast<float>().transpose();
   } else {
-    r.randomised = true;
+    r.randomized = true;
     const Eigen::Index rank = std::min<Eigen::Index>(want + q.oversampling, small);
     std::mt19937_64 rng(q.seed);
     std::normal_distribution<float> normal(0.0f, 1.0f);
@@ -181,7 +181,7 @@ PcaResult Pca(const Eigen::Ref<const RowMatrixXf>& X, const PcaRequest& q) {
 PcaResult PcaFullSvd(const Eigen::Ref<const RowMatrixXf>& X, int components) {
   PcaResult r;
   RowMatrixXf Xc;
-  Centre(X, r, Xc);
+  Center(X, r, Xc);
   r.requested = components;
   const Eigen::MatrixXf xc = Xc;
   Eigen::BDCSVD<Eigen::MatrixXf> svd(xc, Eigen::ComputeThinV);

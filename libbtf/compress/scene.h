@@ -32,7 +32,7 @@ struct SceneSpec {
 };
 
 // Sorted indices of the sampled directions that interpolating any direction of the cones can
-// touch (Sampling::Barycentric support of the cone's centre and of points on rings at 1/4, 1/2,
+// touch (Sampling::Barycentric support of the cone's center and of points on rings at 1/4, 1/2,
 // 3/4 and 1 of its half angle, 24 per ring, clipped to the upper hemisphere). Empty cones = all.
 std::vector<int> NeededDirections(const Sampling& sampling, const std::vector<DirectionCone>& cones);
 

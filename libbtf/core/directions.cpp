@@ -190,7 +190,7 @@ Interpolant Sampling::Barycentric(const Vec3& d_in) const {
   Eigen::Matrix3d m;
   for (int k = 0; k < 3; ++k) m.col(k) = dirs_[static_cast<std::size_t>(idx[k])];
   // Barycentric coordinates of the ray through d on the plane of the three points:
-  // solve m a = d, then normalise a to sum 1 (the ray/plane intersection).
+  // solve m a = d, then normalize a to sum 1 (the ray/plane intersection).
   const Eigen::FullPivLU<Eigen::Matrix3d> lu(m);
   Eigen::Vector3d a = lu.isInvertible() ? Eigen::Vector3d(lu.solve(d)) : Eigen::Vector3d(1, 0, 0);
   for (int k = 0; k < 3; ++k) a[k] = std::max(0.0, a[k]);

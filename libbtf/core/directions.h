@@ -26,7 +26,7 @@ struct Angles {
 };
 
 Vec3 DirectionFromAngles(double theta, double phi);
-Angles AnglesFromDirection(const Vec3& d);  // d need not be normalised; phi = 0 at the poles
+Angles AnglesFromDirection(const Vec3& d);  // d need not be normalized; phi = 0 at the poles
 
 // Half vector (wi + wo) / |wi + wo|; returns +z when wi = -wo (undefined case, documented).
 Vec3 HalfVector(const Vec3& wi, const Vec3& wo);
@@ -73,7 +73,7 @@ class Sampling {
   // Index of the sampled direction with the smallest angle to d.
   int Nearest(const Vec3& d) const;
   // The three nearest sampled directions with barycentric weights of d's projection onto their
-  // plane, clamped to >= 0 and renormalised (weights sum to 1; exact at sampled directions).
+  // plane, clamped to >= 0 and renormalized (weights sum to 1; exact at sampled directions).
   Interpolant Barycentric(const Vec3& d) const;
 
   // A subset (in the given order), named "<name>[i,j,...]".

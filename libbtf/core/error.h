@@ -47,6 +47,16 @@ template <typename... Args>
   throw Error(ExitCode::kUsage, fmt::format(f, std::forward<Args>(args)...));
 }
 
+// Programming errors (a broken invariant of libbtf, never something a user can cause): throws
+// btf::Error with ExitCode::kInternal naming the condition and the source line, so the tool's
+// handler reports "internal error ... please report this" and atomic outputs are cleaned up.
+#define BTF_CHECK(cond)                                                                          \
+  do {                                                                                           \
+    if (!(cond))                                                                                 \
+      throw ::btf::Error(::btf::ExitCode::kInternal,                                             \
+                         ::fmt::format("check failed: {} ({}:{})", #cond, __FILE__, __LINE__));  \
+  } while (0)
+
 // Option checks: `Check()` methods of XxxOptions call this so the message names the field.
 #define BTF_CHECK_OPTION(cond, field, msg)                                                  \
   do {                                                                                       \

@@ -1,9 +1,11 @@
 #pragma once
+// Wall-clock timing of summaries (XxxSummary::times).
 #include <chrono>
 #include <string>
 #include <utility>
 #include <vector>
 
+#include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
 namespace btf {
@@ -37,14 +39,25 @@ class PhaseTimes {
     return t;
   }
   const std::vector<std::pair<std::string, double>>& phases() const { return phases_; }
+  // The one timing schema of every summary and --json document: {"phase": s, ..., "total": s},
+  // stored under the key "seconds" (docs/architecture.md, "JSON output").
   nlohmann::json ToJson() const {
     nlohmann::json j = nlohmann::json::object();
     for (const auto& [name, s] : phases_) j[name] = s;
+    j["total"] = Total();
     return j;
   }
+  // "phase 1.23 s, ..., total 4.56 s" for text reports.
+  std::string Report() const;
 
  private:
   std::vector<std::pair<std::string, double>> phases_;
 };
+
+inline std::string PhaseTimes::Report() const {
+  std::string t;
+  for (const auto& [name, s] : phases_) t += fmt::format("{} {:.2f} s, ", name, s);
+  return t + fmt::format("total {:.2f} s", Total());
+}
 
 }  // namespace btf

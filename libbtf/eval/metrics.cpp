@@ -5,6 +5,7 @@
 #include <numeric>
 
 #include "libbtf/core/error.h"
+#include "libbtf/core/error_stats.h"
 #include "libbtf/eval/plot.h"
 
 namespace btf {
@@ -48,25 +49,14 @@ void Blur(const std::vector<double>& in, int h, int w, const std::vector<double>
 }
 
 struct ImageStats {
-  double sum_sq_err = 0, sum_sq_ref = 0, max_abs = 0, ssim = 0;
-  int max_y = 0, max_x = 0, max_c = 0;
+  ErrorStats errors;  // max_abs_index: the worst value within the image
+  double ssim = 0;
 };
 
 ImageStats MeasureImage(const float* ref, const float* test, int h, int w, int c, double peak, bool ssim,
                         double sigma) {
   ImageStats s;
-  const std::size_t n = std::size_t(h) * w * c;
-  for (std::size_t i = 0; i < n; ++i) {
-    const double d = double(test[i]) - double(ref[i]);
-    s.sum_sq_err += d * d;
-    s.sum_sq_ref += double(ref[i]) * double(ref[i]);
-    if (std::abs(d) > s.max_abs) {
-      s.max_abs = std::abs(d);
-      s.max_c = int(i % c);
-      s.max_x = int((i / c) % w);
-      s.max_y = int(i / (std::size_t(c) * w));
-    }
-  }
+  s.errors.Add(ref, test, std::size_t(h) * w * c);
   if (ssim) s.ssim = MeanSsim(ref, test, h, w, c, peak, sigma);
   return s;
 }
@@ -189,7 +179,34 @@ nlohmann::json CompareSummary::ToJson() const {
   return j;
 }
 
-CompareSummary Compare(const SlotSource& ref, const SlotSource& test, const CompareOptions& options,
+std::string CompareSummary::Report() const {
+  std::string r = fmt::format("reference  {}\ntest       {}\n", reference, test);
+  r += fmt::format("shape      {} views x {} lights x {}x{} texels x {} channels ({} values)\n", views, lights, width,
+                   height, channels, values);
+  r += fmt::format("rmse       {:.6g}\n", rmse);
+  r += fmt::format("rel_l2     {}\n", rel_l2 ? fmt::format("{:.6g}", *rel_l2) : "undefined (reference all zero)");
+  r += fmt::format("psnr       {} (peak {:.6g}, {})\n", psnr_db ? fmt::format("{:.3f} dB", *psnr_db) : "inf (identical)",
+                   peak, peak_source);
+  r += fmt::format("max_abs    {:.6g} at view {} light {} texel (y {}, x {}) channel {}\n", max_abs, max_view, max_light,
+                   max_y, max_x, max_channel);
+  if (mean_ssim) r += fmt::format("mean_ssim  {:.6f}\n", *mean_ssim);
+  r += fmt::format("\n{:>5} {:>9} {:>9} {:>12}   per-view RMSE\n", "view", "theta", "phi", "rmse");
+  for (std::size_t v = 0; v < view_rmse.size() && v < view_angles.size(); ++v)
+    r += fmt::format("{:>5} {:>9.2f} {:>9.2f} {:>12.6g}\n", v, RadToDeg(view_angles[v].theta),
+                     RadToDeg(view_angles[v].phi), view_rmse[v]);
+  r += fmt::format("\n{:>5} {:>9} {:>9} {:>12}   per-light RMSE\n", "light", "theta", "phi", "rmse");
+  for (std::size_t l = 0; l < light_rmse.size() && l < light_angles.size(); ++l)
+    r += fmt::format("{:>5} {:>9.2f} {:>9.2f} {:>12.6g}\n", l, RadToDeg(light_angles[l].theta),
+                     RadToDeg(light_angles[l].phi), light_rmse[l]);
+  r += "\nworst images\n";
+  for (const auto& w : worst)
+    r += fmt::format("  view {:>3} light {:>3}  rmse {:.6g}  max_abs {:.6g}\n", w.view, w.light, w.rmse, w.max_abs);
+  for (const auto& f : error_map_files) r += fmt::format("error map  {}\n", f);
+  r += fmt::format("time       {}\n", times.Report());
+  return r;
+}
+
+CompareSummary Compare(const CompareOptions& options, const SlotSource& ref, const SlotSource& test,
                        const Reporter& reporter) {
   options.Check();
   CheckCompatible(ref, test);
@@ -211,21 +228,21 @@ CompareSummary Compare(const SlotSource& ref, const SlotSource& test, const Comp
     s.peak = options.peak;
     s.peak_source = "option";
   } else {
-    double mx = -std::numeric_limits<double>::infinity();
+    double mx = 0;
     for (int v = 0; v < V; ++v) {
       reporter.Progress(v, V, "reference peak");
       ref.ReadViewSlot(v, rslot.data());
       CheckFiniteSlot(ref, v, rslot.data());
-      for (float x : rslot) mx = std::max(mx, double(x));
+      for (float x : rslot) mx = std::max(mx, std::abs(double(x)));
     }
     reporter.Progress(V, V, "reference peak");
     if (mx > 0) {
       s.peak = mx;
-      s.peak_source = "reference max";
+      s.peak_source = "max |reference value|";
     } else {
       s.peak = 1;
-      s.peak_source = "1 (reference max <= 0)";
-      reporter.Warn("the reference '{}' has no positive value: PSNR and SSIM use peak 1", ref.name());
+      s.peak_source = "1 (reference all zero)";
+      reporter.Warn("the reference '{}' is all zero: PSNR and SSIM use peak 1", ref.name());
     }
     s.times.Add("peak", timer.Seconds());
   }
@@ -247,34 +264,35 @@ CompareSummary Compare(const SlotSource& ref, const SlotSource& test, const Comp
   reporter.Progress(V, V, "compare");
 
   // Merge in a fixed order (deterministic sums).
-  double sse = 0, ssr = 0, ssim = 0;
-  std::vector<double> view_sse(V, 0.0), light_sse(L, 0.0);
+  ErrorStats total;
+  double ssim = 0;
+  std::vector<ErrorStats> per_view(V), per_light(L);
   std::vector<ImageError> images;
   for (int v = 0; v < V; ++v)
     for (int l = 0; l < L; ++l) {
       const ImageStats& st = stats[std::size_t(v) * L + l];
-      sse += st.sum_sq_err;
-      ssr += st.sum_sq_ref;
+      const ErrorStats& e = st.errors;
+      total.Merge(e);
+      per_view[v].Merge(e);
+      per_light[l].Merge(e);
       ssim += st.ssim;
-      view_sse[v] += st.sum_sq_err;
-      light_sse[l] += st.sum_sq_err;
-      if (st.max_abs > s.max_abs || (v == 0 && l == 0)) {
-        s.max_abs = st.max_abs;
-        s.max_view = v, s.max_light = l, s.max_y = st.max_y, s.max_x = st.max_x, s.max_channel = st.max_c;
+      if (e.max_abs_error > s.max_abs || (v == 0 && l == 0)) {
+        const std::size_t i = e.max_abs_index;
+        s.max_abs = e.max_abs_error;
+        s.max_view = v, s.max_light = l, s.max_channel = int(i % C), s.max_x = int((i / C) % W),
+        s.max_y = int(i / (std::size_t(C) * W));
       }
-      images.push_back({v, l, std::sqrt(st.sum_sq_err / double(image)), st.max_abs});
+      images.push_back({v, l, e.Rmse(), e.max_abs_error});
     }
-  s.values = std::uint64_t(V) * L * image;
-  const double mse = sse / double(s.values);
-  s.rmse = std::sqrt(mse);
-  if (ssr > 0)
-    s.rel_l2 = std::sqrt(sse / ssr);
-  else if (sse == 0)
-    s.rel_l2 = 0.0;  // both all zero: identical
-  if (mse > 0) s.psnr_db = 10 * std::log10(s.peak * s.peak / mse);
+  s.values = total.count;
+  s.rmse = total.Rmse();
+  s.rel_l2 = total.RelativeL2();
+  s.psnr_db = total.PsnrDb(s.peak);
   if (options.ssim) s.mean_ssim = ssim / (double(V) * L);
-  for (int v = 0; v < V; ++v) s.view_rmse.push_back(std::sqrt(view_sse[v] / (double(L) * image)));
-  for (int l = 0; l < L; ++l) s.light_rmse.push_back(std::sqrt(light_sse[l] / (double(V) * image)));
+  for (const auto& e : per_view) s.view_rmse.push_back(e.Rmse());
+  for (const auto& e : per_light) s.light_rmse.push_back(e.Rmse());
+  for (int v = 0; v < V; ++v) s.view_angles.push_back(ref.views().angles(v));
+  for (int l = 0; l < L; ++l) s.light_angles.push_back(ref.lights().angles(l));
   std::stable_sort(images.begin(), images.end(), [](const ImageError& a, const ImageError& b) { return a.rmse > b.rmse; });
   s.worst.assign(images.begin(), images.begin() + std::min<std::size_t>(images.size(), options.worst_images));
   s.times.Add("compare", timer.Seconds());

@@ -12,14 +12,15 @@
 
 #include "libbtf/core/progress.h"
 #include "libbtf/core/timer.h"
-#include "libbtf/eval/source.h"
+#include "libbtf/io/slot_source.h"
 #include "libbtf/io/image_io.h"
 
 namespace btf {
 
 struct CompareOptions {
-  // Peak value for PSNR and for the SSIM constants. 0 (default) = the reference's maximum value
-  // (found in a first pass over the reference); a reference whose maximum is <= 0 then uses 1.
+  // Peak value for PSNR and for the SSIM constants. 0 (default) = max |reference value| (found in
+  // a first pass over the reference; the definition compression summaries use too); an all-zero
+  // reference then uses 1.
   double peak = 0;
   // SSIM: standard deviation of the Gaussian window in texels (default 1.5, Wang et al. 2004); the
   // window is truncated at 3 sigma and renormalised at image borders. K1 = 0.01, K2 = 0.03.
@@ -46,13 +47,14 @@ struct CompareSummary {
   // ||test - ref||_2 / ||ref||_2; empty when the reference is all zero.
   std::optional<double> rel_l2;
   double peak = 0;
-  std::string peak_source;  // "reference max", "option", or "1 (reference max <= 0)"
+  std::string peak_source;  // "max |reference value|", "option", or "1 (reference all zero)"
   // 10 log10(peak^2 / MSE); empty when MSE = 0 (identical inputs).
   std::optional<double> psnr_db;
   double max_abs = 0;
   int max_view = 0, max_light = 0, max_y = 0, max_x = 0, max_channel = 0;
   std::optional<double> mean_ssim;  // empty when SSIM was skipped
   std::vector<double> view_rmse, light_rmse;
+  std::vector<Angles> view_angles, light_angles;  // of the reference's samplings
   std::vector<ImageError> worst;             // worst images first
   std::vector<std::string> error_map_files;  // written PNGs
   PhaseTimes times;
@@ -61,10 +63,12 @@ struct CompareSummary {
   // when it is undefined for these inputs (rel of an all-zero reference).
   double Metric(const std::string& metric) const;
   nlohmann::json ToJson() const;
+  // The human-readable report btf-eval compare prints.
+  std::string Report() const;
 };
 
 // Compares two BTFs with equal shapes and samplings (else btf::Error, bad input).
-CompareSummary Compare(const SlotSource& reference, const SlotSource& test, const CompareOptions& options = {},
+CompareSummary Compare(const CompareOptions& options, const SlotSource& reference, const SlotSource& test,
                        const Reporter& reporter = {});
 
 // Mean SSIM of one image pair (height x width x channels), averaged over texels and channels.

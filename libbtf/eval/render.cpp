@@ -9,7 +9,6 @@
 #include "libbtf/core/error.h"
 #include "libbtf/eval/metrics.h"
 #include "libbtf/eval/plot.h"
-#include "libbtf/synth/model.h"
 
 namespace btf {
 
@@ -41,17 +40,17 @@ class DatasetBtfEvaluator final : public BtfEvaluator {
   const Dataset& d_;
 };
 
-class ModelBtfEvaluator final : public BtfEvaluator {
+class CodecBtfEvaluator final : public BtfEvaluator {
  public:
-  explicit ModelBtfEvaluator(const SvbrdfModel& m) : m_(m) {}
-  int channels() const override { return m_.channels(); }
+  explicit CodecBtfEvaluator(const Codec& c) : c_(c) {}
+  int channels() const override { return c_.channels(); }
+  bool cos_theta_i_included() const override { return c_.info().cos_theta_i_included; }
   void Eval(const Vec2& uv, const Vec3& wi, const Vec3& wo, float* out) const override {
-    const Vec2 wrapped(uv.x() - std::floor(uv.x()), uv.y() - std::floor(uv.y()));
-    m_.Eval(wrapped, wi, wo, out);
+    c_.Value(uv, wi, wo, out, UvFilter::kNearest);
   }
 
  private:
-  const SvbrdfModel& m_;
+  const Codec& c_;
 };
 
 struct Hit {
@@ -134,9 +133,7 @@ std::unique_ptr<BtfEvaluator> DatasetEvaluator(const Dataset& dataset) {
   return std::make_unique<DatasetBtfEvaluator>(dataset);
 }
 
-std::unique_ptr<BtfEvaluator> ModelEvaluator(const SvbrdfModel& model) {
-  return std::make_unique<ModelBtfEvaluator>(model);
-}
+std::unique_ptr<BtfEvaluator> CodecEvaluator(const Codec& codec) { return std::make_unique<CodecBtfEvaluator>(codec); }
 
 void RenderOptions::Check() const {
   BTF_CHECK_OPTION(scene == "patch" || scene == "cylinder", "scene", "must be patch or cylinder");

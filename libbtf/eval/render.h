@@ -5,13 +5,12 @@
 #include <memory>
 #include <string>
 
+#include "libbtf/compress/codec.h"
 #include "libbtf/core/dataset.h"
 #include "libbtf/core/directions.h"
 #include "libbtf/io/image_io.h"
 
 namespace btf {
-
-class SvbrdfModel;
 
 // A BTF evaluated at any texture position and pair of directions: (uv, wi, wo) -> channels,
 // directions in the local frame (z = normal, x = weft/u, y = warp/v), uv with period 1.
@@ -28,8 +27,9 @@ class BtfEvaluator {
 // v near 1 as in docs/conventions.md) and barycentric interpolation over the three nearest views x
 // the three nearest lights (Sampling::Barycentric), 9 samples.
 std::unique_ptr<BtfEvaluator> DatasetEvaluator(const Dataset& dataset);
-// An analytic model (which must outlive the evaluator), for ground truth without sampling.
-std::unique_ptr<BtfEvaluator> ModelEvaluator(const SvbrdfModel& model);
+// A codec's arbitrary-direction decoder (Codec::Value: barycentric over the three nearest views x
+// lights, nearest texel so it matches DatasetEvaluator). The codec must outlive the evaluator.
+std::unique_ptr<BtfEvaluator> CodecEvaluator(const Codec& codec);
 
 struct RenderOptions {
   std::string scene = "patch";      // "patch" (a 2 x 2 flat square) or "cylinder" (radius 0.6, length 2)

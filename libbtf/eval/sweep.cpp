@@ -10,7 +10,7 @@
 #include "libbtf/compress/codec.h"
 #include "libbtf/core/atomic_file.h"
 #include "libbtf/core/error.h"
-#include "libbtf/eval/codec_source.h"
+#include "libbtf/compress/codec_source.h"
 #include "libbtf/eval/metrics.h"
 #include "libbtf/eval/plot.h"
 #include "libbtf/io/dataset_io.h"
@@ -229,6 +229,18 @@ nlohmann::json SweepPoint::ToJson() const {
   return j;
 }
 
+std::string SweepSummary::Report() const {
+  std::string r = fmt::format("{:<22} {:>10} {:>7} {:>11} {:>11} {:>11} {:>9}\n", "setting", "bytes", "ratio",
+                              "compress s", "decode s", error_metric, "Pareto");
+  for (const auto& p : points)
+    r += fmt::format("{:<22} {:>10} {:>7.1f} {:>11.4g} {:>11.4g} {:>11.4g} {:>9}\n",
+                     p.method == "lpca" ? fmt::format("lpca k={} c={}", p.clusters, p.components)
+                                        : fmt::format("{} c={}", p.method, p.components),
+                     p.bytes, p.ratio_float32, p.compress_s, p.decode_s, p.error,
+                     std::string(p.pareto_bytes ? "B" : "") + (p.pareto_compress ? "C" : "") + (p.pareto_decode ? "D" : ""));
+  return r + fmt::format("report: {}\n", report);
+}
+
 nlohmann::json SweepSummary::ToJson() const {
   nlohmann::json j;
   j["dataset"] = dataset;
@@ -250,8 +262,8 @@ nlohmann::json SweepSummary::ToJson() const {
   return j;
 }
 
-SweepSummary RunSweep(const std::filesystem::path& dataset_path, const std::filesystem::path& dir,
-                      const SweepOptions& o, const Reporter& reporter) {
+SweepSummary RunSweep(const SweepOptions& o, const std::filesystem::path& dataset_path, const std::filesystem::path& dir,
+                      const Reporter& reporter) {
   o.Check();
   Timer timer;
   const Dataset data = ReadDataset(dataset_path);
@@ -302,7 +314,7 @@ SweepSummary RunSweep(const std::filesystem::path& dataset_path, const std::file
     CompressSummary cs;
     for (int r = 0; r < o.runs; ++r) {
       Timer t;
-      codec = Compress(data, opt, Reporter(), &cs);
+      cs = Compress(opt, *truth, &codec);
       p.compress_runs.push_back(t.Seconds());
     }
     p.warnings = cs.warnings;
@@ -326,7 +338,7 @@ SweepSummary RunSweep(const std::filesystem::path& dataset_path, const std::file
     }
     p.compress_s = Median(p.compress_runs);
     p.decode_s = Median(p.decode_runs);
-    const CompareSummary e = Compare(*truth, *MemorySource(decoded, PointName(p)), co);
+    const CompareSummary e = Compare(co, *truth, *MemorySource(decoded, PointName(p)));
     s.psnr_peak = e.peak;
     p.rmse = e.rmse, p.max_abs = e.max_abs, p.rel_l2 = e.rel_l2, p.psnr_db = e.psnr_db, p.mean_ssim = e.mean_ssim;
     p.error = o.error_metric == "rel" && e.rel_l2 ? *e.rel_l2 : e.rmse;

@@ -72,11 +72,12 @@ struct SweepSummary {
   std::string report;
   PhaseTimes times;
   nlohmann::json ToJson() const;
+  std::string Report() const;  // the settings table and where the report is
 };
 
 // Reads the dataset into memory, sweeps, writes into output_dir (created if missing).
-SweepSummary RunSweep(const std::filesystem::path& dataset, const std::filesystem::path& output_dir,
-                      const SweepOptions& options, const Reporter& reporter = {});
+SweepSummary RunSweep(const SweepOptions& options, const std::filesystem::path& dataset,
+                      const std::filesystem::path& output_dir, const Reporter& reporter = {});
 
 // Median of a non-empty list (mean of the middle two for even sizes).
 double Median(std::vector<double> values);

@@ -42,12 +42,18 @@ nlohmann::json SchneiderExportSummary::ToJson() const {
           {"weight_bytes", weight_bytes},
           {"index_bytes", index_bytes},
           {"total_bytes", texture_bytes + weight_bytes + index_bytes},
-          {"max_quantisation_error_in_scale_units", max_quantisation_error},
+          {"max_quantisation_error_in_scale_units", max_quantization_error},
           {"seconds", times.ToJson()}};
 }
 
-SchneiderExportSummary ExportSchneider(const Codec& codec, const std::filesystem::path& dir,
-                                       const SchneiderExportOptions& o, const Reporter& rep) {
+std::string SchneiderExportSummary::Report() const {
+  return fmt::format("{}/ : {} clusters x {} functions on a {}^2 x {}^2 grid; textures {}, weights {}, index {}; {}\n",
+                     directory, clusters, functions, view_grid, light_grid, FormatBytes(texture_bytes),
+                     FormatBytes(weight_bytes), FormatBytes(index_bytes), times.Report());
+}
+
+SchneiderExportSummary ExportSchneider(const SchneiderExportOptions& o, const Codec& codec,
+                                       const std::filesystem::path& dir, const Reporter& rep) {
   o.Check();
   if (codec.method() != CodecMethod::kLpca)
     ThrowUsage("the schneider export needs an LPCA codec; this one is '{}' (compress with --method lpca)",
@@ -108,7 +114,7 @@ SchneiderExportSummary ExportSchneider(const Codec& codec, const std::filesystem
       const float sc = scales[std::size_t(k) * F + f];
       std::uint8_t* out = &tex[(std::size_t(k) * F + f) * grid * C];
       for (std::size_t i = 0; i < vals.size(); ++i) {
-        // Signed normalised 8 bits: q in 0..255 stands for q / 127.5 - 1 in [-1, 1].
+        // Signed normalized 8 bits: q in 0..255 stands for q / 127.5 - 1 in [-1, 1].
         const double u = sc > 0 ? vals[i] / sc : 0.0;
         const long q = std::lround((u + 1.0) * 127.5);
         out[i] = static_cast<std::uint8_t>(std::clamp(q, 0L, 255L));
@@ -183,7 +189,7 @@ SchneiderExportSummary ExportSchneider(const Codec& codec, const std::filesystem
   s.height = codec.height();
   s.width = codec.width();
   s.channels = C;
-  s.max_quantisation_error = max_q;
+  s.max_quantization_error = max_q;
   rep.Progress(std::size_t(K), std::size_t(K), "resample");
   return s;
 }

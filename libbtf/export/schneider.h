@@ -9,7 +9,7 @@
 //   eigen_abrdfs.u8      uint8 [K][F][n_tl * n_sl][n_tv][n_sv][C], F = 1 + c (function 0 = mean)
 //   weights.f32          float32 [H][W][F]: per-texel weights with the scales folded in
 //   cluster_index.u16    uint16 [H][W]
-//   scales.f32           float32 [K][F]: the quantisation scales (informative; already folded)
+//   scales.f32           float32 [K][F]: the quantization scales (informative; already folded)
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -36,19 +36,20 @@ struct SchneiderExportSummary {
   std::string directory;
   int clusters = 0, functions = 0, view_grid = 0, light_grid = 0, height = 0, width = 0, channels = 0;
   std::uint64_t texture_bytes = 0, weight_bytes = 0, index_bytes = 0;
-  // Largest |quantised - exact| over all stored function values, in units of that function's scale.
-  double max_quantisation_error = 0;
+  // Largest |quantized - exact| over all stored function values, in units of that function's scale.
+  double max_quantization_error = 0;
   PhaseTimes times;
   nlohmann::json ToJson() const;
+  std::string Report() const;
 };
 
-// Grid sample i of n along one square axis: the cell centre (i + 0.5) / n.
+// Grid sample i of n along one square axis: the cell center (i + 0.5) / n.
 inline double GridCoordinate(int i, int n) { return (i + 0.5) / n; }
 
 // Writes the export into `directory` (created if needed; files replaced atomically, manifest last).
 // Throws btf::Error (usage) for pca-view codecs and for log-transformed codecs (the renderer sums
 // weighted functions linearly, which a log transform does not allow).
-SchneiderExportSummary ExportSchneider(const Codec& codec, const std::filesystem::path& directory,
-                                       const SchneiderExportOptions& options = {}, const Reporter& reporter = {});
+SchneiderExportSummary ExportSchneider(const SchneiderExportOptions& options, const Codec& codec,
+                                       const std::filesystem::path& directory, const Reporter& reporter = {});
 
 }  // namespace btf

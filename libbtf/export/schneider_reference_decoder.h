@@ -93,7 +93,7 @@ class SchneiderReferenceDecoder {
       ThrowBadInput("'{}' does not hold exactly {} values of {} bytes", path.string(), count, sizeof(T));
     return v;
   }
-  // Decoded (signed normalised) texel of function f of cluster k.
+  // Decoded (signed normalized) texel of function f of cluster k.
   double Texel(int k, int f, int z, int tv, int sv, int ch) const {
     const std::size_t i =
         ((((std::size_t(k) * functions_ + f) * nl_ * nl_ + z) * nv_ + tv) * nv_ + sv) * channels_ + ch;

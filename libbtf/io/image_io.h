@@ -28,7 +28,7 @@ struct ImageWriteOptions {
 
 // Reads any format OpenImageIO reads. Integer files tagged sRGB (PNG and JPEG by default, or an
 // "oiio:ColorSpace" of sRGB) are decoded to linear; everything else is read as stored and
-// normalised to [0, 1] for integer types. Throws btf::Error naming the file.
+// normalized to [0, 1] for integer types. Throws btf::Error naming the file.
 Image ReadImage(const std::filesystem::path& path);
 // Writes atomically. Values are clamped to the integer range for integer formats.
 void WriteImage(const std::filesystem::path& path, const Image& image, const ImageWriteOptions& options = {});

@@ -351,4 +351,26 @@ void WriteTruth(const std::filesystem::path& path, const std::vector<PhotoTruth>
   WriteJsonAtomic(path, j);
 }
 
+bool ProjectToPixel(const CameraModel& camera, const Eigen::Matrix3d& R, const Vec3& t, const Vec3& p, Vec2* pixel) {
+  const Vec3 c = R * p + t;
+  if (!(c.z() > 1e-9)) return false;
+  const double x = c.x() / c.z(), y = c.y() / c.z();
+  const double r2 = x * x + y * y;
+  const double f = 1 + camera.k1 * r2 + camera.k2 * r2 * r2;
+  *pixel = Vec2(camera.fx * x * f + camera.cx, camera.fy * y * f + camera.cy);
+  return true;
+}
+
+Eigen::Matrix3d PlaneHomography(const CameraModel& camera, const Eigen::Matrix3d& R, const Vec3& t, double plane_z) {
+  Eigen::Matrix3d K;
+  K << camera.fx, 0, camera.cx, 0, camera.fy, camera.cy, 0, 0, 1;
+  Eigen::Matrix3d M;
+  // (x, y, z0) -> R (x, y, z0) + t = r1 x + r2 y + (t + z0 r3).
+  M.col(0) = R.col(0);
+  M.col(1) = R.col(1);
+  M.col(2) = t + plane_z * R.col(2);
+  Eigen::Matrix3d H = K * M;
+  return H / H(2, 2);
+}
+
 }  // namespace btf

@@ -2,10 +2,10 @@
 // The measurement rig as files: board (marker layout), photo manifest, and ground truth
 // (written by btf-synth photos, read by btf-register). Normative: docs/format.md.
 //
-// Plate frame: millimetres, origin at the centre of the sample region, x right (= weft, texture
+// Plate frame: millimetres, origin at the center of the sample region, x right (= weft, texture
 // u), y up (= warp, texture v), z towards the camera side; the material surface is z = 0 and a
 // marker at height h lies in the plane z = h.
-// Pixel convention: OpenCV's, pixel centres at integer coordinates, (0,0) = centre of the
+// Pixel convention: OpenCV's, pixel centers at integer coordinates, (0,0) = center of the
 // top-left pixel, y down.
 #include <array>
 #include <filesystem>
@@ -30,7 +30,7 @@ struct Marker {
 
 struct Board {
   std::string family = "tag36h11";
-  double sample_size_mm = 40;  // side of the square sample region centred at the origin
+  double sample_size_mm = 40;  // side of the square sample region centered at the origin
   std::vector<Marker> markers;
   void Check(const std::string& source) const;  // ids unique, corners finite, non-degenerate
 };
@@ -40,6 +40,16 @@ struct CameraModel {
   double fx = 0, fy = 0, cx = 0, cy = 0;  // OpenCV convention
   double k1 = 0, k2 = 0;                  // radial distortion (OpenCV model, no tangential)
 };
+
+// The camera projection shared by photo synthesis and registration (docs/conventions.md): plate
+// point p (mm, z above the material surface) -> pixel (OpenCV convention), through the pose
+// camera_from_plate (R, t) and radial distortion k1, k2. False if p is not in front of the camera.
+bool ProjectToPixel(const CameraModel& camera, const Eigen::Matrix3d& camera_from_plate_rotation,
+                    const Vec3& camera_from_plate_translation, const Vec3& p, Vec2* pixel);
+
+// The homography plate plane z = plane_z (mm) -> undistorted pixels, normalized to h33 = 1.
+Eigen::Matrix3d PlaneHomography(const CameraModel& camera, const Eigen::Matrix3d& camera_from_plate_rotation,
+                                const Vec3& camera_from_plate_translation, double plane_z = 0);
 
 struct PhotoEntry {
   std::string file;  // relative to the manifest's folder

@@ -106,10 +106,10 @@ TagDetector::TagDetector(const TagDetectorOptions& options) : impl_(std::make_un
 
 TagDetector::~TagDetector() = default;
 
-std::vector<TagDetection> TagDetector::Detect(const unsigned char* grey, int width, int height, int stride) const {
+std::vector<TagDetection> TagDetector::Detect(const unsigned char* gray, int width, int height, int stride) const {
   if (width < 1 || height < 1 || stride < width) ThrowBadInput("tag detection: bad image size {}x{}", width, height);
   // AprilTag reads the buffer only (quad_sigma is 0); its struct wants a non-const pointer.
-  image_u8_t im{width, height, stride, const_cast<unsigned char*>(grey)};
+  image_u8_t im{width, height, stride, const_cast<unsigned char*>(gray)};
   errno = 0;
   zarray_t* dets = apriltag_detector_detect(impl_->detector, &im);
   if (!dets) throw Error(ExitCode::kInternal, "libapriltag: detection failed");
@@ -124,13 +124,13 @@ std::vector<TagDetection> TagDetector::Detect(const unsigned char* grey, int wid
     t.decision_margin = d->decision_margin;
     bool inside = true;
     for (int k = 0; k < 4; ++k) {
-      // The one place where AprilTag's pixel-corner origin becomes OpenCV's pixel-centre origin.
+      // The one place where AprilTag's pixel-corner origin becomes OpenCV's pixel-center origin.
       t.corners[k] = Vec2(d->p[k][0] - 0.5, d->p[k][1] - 0.5);
       const Vec2& c = t.corners[k];
       const double m = options_.border_margin_px;
       if (!(c.x() >= m && c.y() >= m && c.x() <= width - 1 - m && c.y() <= height - 1 - m)) inside = false;
     }
-    t.centre = Vec2(d->c[0] - 0.5, d->c[1] - 0.5);
+    t.center = Vec2(d->c[0] - 0.5, d->c[1] - 0.5);
     if (inside) out.push_back(t);  // border-cut tags can decode with wrong corners (notes 1.5)
   }
   apriltag_detections_destroy(dets);
@@ -139,26 +139,26 @@ std::vector<TagDetection> TagDetector::Detect(const unsigned char* grey, int wid
 }
 
 namespace {
-std::vector<float> LinearGrey(const Image& image) {
+std::vector<float> LinearGray(const Image& image) {
   const std::size_t n = static_cast<std::size_t>(image.width) * image.height;
-  std::vector<float> grey(n);
+  std::vector<float> gray(n);
   for (std::size_t i = 0; i < n; ++i) {
     const float* p = &image.pixels[i * image.channels];
     float g = image.channels >= 3 ? 0.2126f * p[0] + 0.7152f * p[1] + 0.0722f * p[2] : p[0];
-    grey[i] = std::isfinite(g) ? std::max(g, 0.0f) : 0.0f;
+    gray[i] = std::isfinite(g) ? std::max(g, 0.0f) : 0.0f;
   }
-  return grey;
+  return gray;
 }
 
-std::vector<unsigned char> Quantise(const std::vector<float>& grey) {
-  const std::size_t n = grey.size();
-  std::vector<float> sorted = grey;
+std::vector<unsigned char> Quantize(const std::vector<float>& gray) {
+  const std::size_t n = gray.size();
+  std::vector<float> sorted = gray;
   const std::size_t k = std::min(n - 1, static_cast<std::size_t>(0.995 * static_cast<double>(n)));
   std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(k), sorted.end());
   const float top = sorted[k] > 0 ? sorted[k] : 1.0f;
   std::vector<unsigned char> out(n);
   for (std::size_t i = 0; i < n; ++i)
-    out[i] = static_cast<unsigned char>(std::lround(std::clamp(grey[i] / top, 0.0f, 1.0f) * 255.0f));
+    out[i] = static_cast<unsigned char>(std::lround(std::clamp(gray[i] / top, 0.0f, 1.0f) * 255.0f));
   return out;
 }
 
@@ -176,20 +176,20 @@ double Bilinear(const std::vector<float>& g, int w, int h, double x, double y, b
 
 }  // namespace
 
-std::vector<unsigned char> GreyForDetection(const Image& image) { return Quantise(LinearGrey(image)); }
+std::vector<unsigned char> GrayForDetection(const Image& image) { return Quantize(LinearGray(image)); }
 
-bool RefineTagCorners(const std::vector<float>& grey, int w, int h, int modules, std::array<Vec2, 4>* corners) {
+bool RefineTagCorners(const std::vector<float>& gray, int w, int h, int modules, std::array<Vec2, 4>* corners) {
   if (w < 2 || h < 2) return false;
   for (int pass = 0; pass < 2; ++pass) {
     std::array<Vec2, 4>& c = *corners;
-    // The quad's centre decides which side of an edge is inside (order-agnostic).
-    const Vec2 centre = 0.25 * (c[0] + c[1] + c[2] + c[3]);
+    // The quad's center decides which side of an edge is inside (order-agnostic).
+    const Vec2 center = 0.25 * (c[0] + c[1] + c[2] + c[3]);
     std::array<Eigen::Vector3d, 4> lines;  // a x + b y + d = 0 with (a, b) unit
     for (int e = 0; e < 4; ++e) {
       const Vec2 a = c[e], b = c[(e + 1) % 4];
       const Vec2 dir = (b - a).normalized();
       Vec2 normal(-dir.y(), dir.x());
-      if ((centre - a).dot(normal) > 0) normal = -normal;  // outward
+      if ((center - a).dot(normal) > 0) normal = -normal;  // outward
       // Module size across this edge: the adjacent edges' lengths / modules, projected on the normal.
       const double across = std::min(std::abs((c[(e + 3) % 4] - a).dot(normal)), std::abs((c[(e + 2) % 4] - b).dot(normal)));
       const double module = across / modules;
@@ -198,23 +198,23 @@ bool RefineTagCorners(const std::vector<float>& grey, int w, int h, int modules,
       const int samples = std::clamp(static_cast<int>(len / 1.5), 8, 200);
       std::vector<Vec2> pts;
       for (int i = 0; i < samples; ++i) {
-        // Stay a module away from the corners, where the neighbouring edge bends the profile.
+        // Stay a module away from the corners, where the neighboring edge bends the profile.
         const double t = module / len + (1 - 2 * module / len) * (i + 0.5) / samples;
         if (t <= 0 || t >= 1) continue;
         const Vec2 p = a + t * (b - a);
         bool ok = true;
-        const double dark = Bilinear(grey, w, h, p.x() - 0.5 * module * normal.x(), p.y() - 0.5 * module * normal.y(), &ok);
-        const double bright = Bilinear(grey, w, h, p.x() + 0.5 * module * normal.x(), p.y() + 0.5 * module * normal.y(), &ok);
+        const double dark = Bilinear(gray, w, h, p.x() - 0.5 * module * normal.x(), p.y() - 0.5 * module * normal.y(), &ok);
+        const double bright = Bilinear(gray, w, h, p.x() + 0.5 * module * normal.x(), p.y() + 0.5 * module * normal.y(), &ok);
         if (!ok || !(bright - dark > 1e-6)) continue;
         // Edge position from the profile's area: for a step from `dark` to `bright` at s_e, the
-        // integral of the normalised profile over [-m/2, m/2] is m/2 - s_e, and any blur narrower
+        // integral of the normalized profile over [-m/2, m/2] is m/2 - s_e, and any blur narrower
         // than the window preserves it. Less sensitive to interpolation error than a level crossing.
         const int nsteps = std::max(8, static_cast<int>(module / 0.05));
         const double step = module / nsteps;
         double area = 0;
         for (int k = 0; k <= nsteps && ok; ++k) {
           const double s = -0.5 * module + k * step;
-          const double v = Bilinear(grey, w, h, p.x() + s * normal.x(), p.y() + s * normal.y(), &ok);
+          const double v = Bilinear(gray, w, h, p.x() + s * normal.x(), p.y() + s * normal.y(), &ok);
           const double u = std::clamp((v - dark) / (bright - dark), 0.0, 1.0);
           area += (k == 0 || k == nsteps ? 0.5 : 1.0) * u * step;
         }
@@ -247,13 +247,13 @@ bool RefineTagCorners(const std::vector<float>& grey, int w, int h, int modules,
 
 std::vector<TagDetection> TagDetector::Detect(const Image& image) const {
   if (image.width < 1 || image.height < 1 || image.channels < 1) ThrowBadInput("tag detection: empty image");
-  const std::vector<float> grey = LinearGrey(image);
-  const std::vector<unsigned char> grey8 = Quantise(grey);
-  std::vector<TagDetection> dets = Detect(grey8.data(), image.width, image.height, image.width);
+  const std::vector<float> gray = LinearGray(image);
+  const std::vector<unsigned char> gray8 = Quantize(gray);
+  std::vector<TagDetection> dets = Detect(gray8.data(), image.width, image.height, image.width);
   if (options_.refine_corners)
     for (auto& d : dets) {
       std::array<Vec2, 4> c = d.corners;
-      if (RefineTagCorners(grey, image.width, image.height, impl_->family->width_at_border, &c)) d.corners = c;
+      if (RefineTagCorners(gray, image.width, image.height, impl_->family->width_at_border, &c)) d.corners = c;
     }
   return dets;
 }

@@ -3,8 +3,8 @@
 //
 // Corner order: AprilTag's, for the upright printed tag: left-bottom, right-bottom, right-top,
 // left-top of the detection square (the black border's outer edge); this is the board file's order.
-// Pixel convention: OpenCV's, pixel centres at integer coordinates ((0,0) = centre of the top-left
-// pixel). AprilTag reports (0.5, 0.5) for that centre; the shift is applied once, in DetectTags.
+// Pixel convention: OpenCV's, pixel centers at integer coordinates ((0,0) = center of the top-left
+// pixel). AprilTag reports (0.5, 0.5) for that center; the shift is applied once, in DetectTags.
 #include <array>
 #include <memory>
 #include <string>
@@ -34,7 +34,7 @@ struct TagDetection {
   int hamming = 0;
   double decision_margin = 0;
   std::array<Vec2, 4> corners;  // px, OpenCV convention, order documented above
-  Vec2 centre = Vec2::Zero();   // px, OpenCV convention
+  Vec2 center = Vec2::Zero();   // px, OpenCV convention
 };
 
 // Families this build can create.
@@ -48,9 +48,9 @@ class TagDetector {
   TagDetector(const TagDetector&) = delete;
   TagDetector& operator=(const TagDetector&) = delete;
 
-  // grey: row-major 8-bit, width x height, any stride >= width. Sorted by id.
-  std::vector<TagDetection> Detect(const unsigned char* grey, int width, int height, int stride) const;
-  // Converts a linear float image to 8-bit grey (see GreyForDetection) and detects.
+  // gray: row-major 8-bit, width x height, any stride >= width. Sorted by id.
+  std::vector<TagDetection> Detect(const unsigned char* gray, int width, int height, int stride) const;
+  // Converts a linear float image to 8-bit gray (see GrayForDetection) and detects.
   std::vector<TagDetection> Detect(const Image& image) const;
   const TagDetectorOptions& options() const { return options_; }
 
@@ -63,14 +63,14 @@ class TagDetector {
 // Sub-pixel corner refinement used by Detect(const Image&) when refine_corners is set: along each
 // edge of the quad, the 50% crossing between the black border level (half a module inside) and
 // the quiet-zone level (half a module outside) is located on profiles normal to the edge in the
-// linear grey image (exact for a straight edge under any symmetric blur); a total-least-squares
+// linear gray image (exact for a straight edge under any symmetric blur); a total-least-squares
 // line per edge; corners = intersections of adjacent lines. Two passes. `modules` = the family's
 // width_at_border. Returns false (corners unchanged) if an edge has too few valid profiles.
-bool RefineTagCorners(const std::vector<float>& grey, int width, int height, int modules, std::array<Vec2, 4>* corners);
+bool RefineTagCorners(const std::vector<float>& gray, int width, int height, int modules, std::array<Vec2, 4>* corners);
 
-// Linear grey (Rec.709 luminance for 3+ channels) scaled so the 99.5th percentile maps to 255.
+// Linear gray (Rec.709 luminance for 3+ channels) scaled so the 99.5th percentile maps to 255.
 // Stays linear on purpose: AprilTag thresholds at the mid level, and under a symmetric blur the
 // 50% crossing of the linear signal is the true edge (a gamma curve would move it).
-std::vector<unsigned char> GreyForDetection(const Image& image);
+std::vector<unsigned char> GrayForDetection(const Image& image);
 
 }  // namespace btf

@@ -25,25 +25,7 @@ bool PhotoGeometry::Project(const Vec3& p, Vec2* px) const {
     *px = h.head<2>() / h.z();
     return true;
   }
-  const Vec3 c = rotation * p + translation;
-  if (!(c.z() > 1e-9)) return false;
-  const double x = c.x() / c.z(), y = c.y() / c.z();
-  const double r2 = x * x + y * y;
-  const double f = 1 + camera.k1 * r2 + camera.k2 * r2 * r2;
-  *px = Vec2(camera.fx * x * f + camera.cx, camera.fy * y * f + camera.cy);
-  return true;
-}
-
-Eigen::Matrix3d PlaneHomography(const CameraModel& cam, const Eigen::Matrix3d& R, const Vec3& t, double plane_z) {
-  Eigen::Matrix3d K;
-  K << cam.fx, 0, cam.cx, 0, cam.fy, cam.cy, 0, 0, 1;
-  Eigen::Matrix3d M;
-  // (x, y, z0) -> R (x, y, z0) + t = r1 x + r2 y + (t + z0 r3).
-  M.col(0) = R.col(0);
-  M.col(1) = R.col(1);
-  M.col(2) = t + plane_z * R.col(2);
-  Eigen::Matrix3d H = K * M;
-  return H / H(2, 2);
+  return ProjectToPixel(camera, rotation, translation, p, px);
 }
 
 PhotoGeometry EstimateGeometry(const Board& board, const std::vector<TagDetection>& detections,

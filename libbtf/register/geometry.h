@@ -25,7 +25,7 @@ struct GeometryOptions {
   void Check() const;
 };
 
-// Plate (mm) -> pixel map of one photo, pixel centres at integer coordinates.
+// Plate (mm) -> pixel map of one photo, pixel centers at integer coordinates.
 struct PhotoGeometry {
   bool has_pose = false;
   CameraModel camera;                                             // used when has_pose
@@ -46,9 +46,5 @@ struct PhotoGeometry {
 PhotoGeometry EstimateGeometry(const Board& board, const std::vector<TagDetection>& detections,
                                const std::optional<CameraModel>& camera, const GeometryOptions& options,
                                std::vector<std::string>* warnings);
-
-// Homography (h33 = 1) from plate (mm, z = plane_z) to pixel, for a pose without distortion.
-Eigen::Matrix3d PlaneHomography(const CameraModel& camera, const Eigen::Matrix3d& rotation, const Vec3& translation,
-                                double plane_z);
 
 }  // namespace btf

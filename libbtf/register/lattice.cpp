@@ -56,14 +56,14 @@ bool IntegerLatticeBasis(std::vector<Eigen::Vector2i> rows, Eigen::Vector2i* b1,
   }
 }
 
-std::vector<Peak> SpectrumPeaks(const std::vector<float>& grey, int w, int h, const LatticeOptions& o, double* noise,
+std::vector<Peak> SpectrumPeaks(const std::vector<float>& gray, int w, int h, const LatticeOptions& o, double* noise,
                                 cv::Mat* windowed) {
   cv::Mat img(h, w, CV_32F);
   double mean = 0;
-  for (float v : grey) mean += v;
-  mean /= static_cast<double>(grey.size());
+  for (float v : gray) mean += v;
+  mean /= static_cast<double>(gray.size());
   for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) img.at<float>(y, x) = static_cast<float>(grey[static_cast<std::size_t>(y) * w + x] - mean);
+    for (int x = 0; x < w; ++x) img.at<float>(y, x) = static_cast<float>(gray[static_cast<std::size_t>(y) * w + x] - mean);
   cv::Mat win;
   cv::createHanningWindow(win, cv::Size(w, h), CV_32F);
   img = img.mul(win);
@@ -208,13 +208,13 @@ nlohmann::json Lattice::ToJson() const {
            }()}};
 }
 
-Lattice EstimateLattice(const std::vector<float>& grey, int w, int h, const LatticeOptions& o) {
+Lattice EstimateLattice(const std::vector<float>& gray, int w, int h, const LatticeOptions& o) {
   o.Check();
-  if (w < 16 || h < 16 || grey.size() != static_cast<std::size_t>(w) * h)
+  if (w < 16 || h < 16 || gray.size() != static_cast<std::size_t>(w) * h)
     ThrowBadInput("lattice estimation needs an image of at least 16x16 texels (got {}x{})", w, h);
   double noise = 0;
   cv::Mat windowed;
-  const std::vector<Peak> all = SpectrumPeaks(grey, w, h, o, &noise, &windowed);
+  const std::vector<Peak> all = SpectrumPeaks(gray, w, h, o, &noise, &windowed);
   if (all.empty()) ThrowBadInput("lattice estimation: the image has no periodic structure (flat spectrum)");
   std::vector<Peak> peaks;
   for (const auto& p : all)
@@ -285,7 +285,7 @@ Lattice EstimateLattice(const std::vector<float>& grey, int w, int h, const Latt
   Eigen::Matrix2d R;
   R << r1, r2;
 
-  // Harmonic fit: R minimising sum w |R m_i - p_i|^2 over all peaks near lattice nodes m_i.
+  // Harmonic fit: R minimizing sum w |R m_i - p_i|^2 over all peaks near lattice nodes m_i.
   L.peaks_found = static_cast<int>(peaks.size());
   for (const auto& p : peaks) L.peaks.emplace_back(p.f, p.magnitude);
   for (int pass = 0; pass < 3; ++pass) {

@@ -1,7 +1,7 @@
 #pragma once
 // Weave-lattice estimation and unit-tile averaging (registration notes section 6).
 //
-// Coordinates: texel units of the normtexture, x = column (right), y = row (down), texel centres
+// Coordinates: texel units of the normtexture, x = column (right), y = row (down), texel centers
 // at integers. A lattice is origin + i a1 + j a2 (i, j integer); the unit tile is the
 // parallelogram spanned by a1, a2.
 #include <string>
@@ -39,13 +39,13 @@ struct Lattice {
   nlohmann::json ToJson() const;
 };
 
-// Estimates the lattice of a periodic grey image (row-major width x height): Hann-windowed DFT,
+// Estimates the lattice of a periodic gray image (row-major width x height): Hann-windowed DFT,
 // peaks refined to the maximum of the windowed DTFT (no bin-grid bias), the coarsest reciprocal lattice generating every
 // significant peak (the smallest repeat consistent with all peaks, so twill/satin sub-harmonics
 // are honoured; peaks that are aliases of the strong lattice's harmonics are skipped), then a
 // magnitude-weighted least-squares fit of the basis to all harmonics.
 // Throws btf::Error (bad input) if no two non-collinear periods are found.
-Lattice EstimateLattice(const std::vector<float>& grey, int width, int height, const LatticeOptions& options = {});
+Lattice EstimateLattice(const std::vector<float>& gray, int width, int height, const LatticeOptions& options = {});
 
 struct TileAverageOptions {
   int tile_resolution = 0;     // samples per tile axis; 0 = ceil(2 max(|a1|, |a2|)): twice the texel density,

@@ -20,7 +20,7 @@ void ApplyRadiometry(Image& tex, const PhotoEntry& p, double s) {
   const int n = tex.width;
   for (int row = 0; row < n; ++row)
     for (int col = 0; col < n; ++col) {
-      const double e = IrradianceAt(p, TexelCentreMm(col, row, n, s));
+      const double e = IrradianceAt(p, TexelCenterMm(col, row, n, s));
       if (!(e > 0) || !std::isfinite(e))
         ThrowBadInput("'{}': the light is at or below the horizon of texel ({}, {}) (irradiance {}): check light_dir "
                       "and light_distance_mm in the manifest",

@@ -17,7 +17,7 @@ void RectifyOptions::Check() const {
                    "min_samples_per_axis..64");
 }
 
-Vec2 TexelCentreMm(double col, double row, int n, double s) {
+Vec2 TexelCenterMm(double col, double row, int n, double s) {
   return Vec2(-s / 2 + (col + 0.5) * s / n, s / 2 - (row + 0.5) * s / n);
 }
 
@@ -51,7 +51,7 @@ Image Rectify(const Image& photo, const PlateToPixel& project, double s, const R
     std::vector<double> acc(static_cast<std::size_t>(ch));
     std::vector<float> v(static_cast<std::size_t>(ch));
     for (int col = 0; col < n; ++col) {
-      const Vec2 c = TexelCentreMm(col, row, n, s);
+      const Vec2 c = TexelCenterMm(col, row, n, s);
       Vec2 p0, pu, pv;
       bool ok = project(c, &p0) && project(c + Vec2(texel, 0), &pu) && project(c - Vec2(0, texel), &pv);
       if (!ok) {

@@ -39,10 +39,10 @@ using PlateToPixel = std::function<bool(const Vec2& plate_mm, Vec2* px)>;
 Image Rectify(const Image& photo, const PlateToPixel& project, double sample_size_mm, const RectifyOptions& options,
               RectifyStats* stats = nullptr);
 
-// Plate position (mm) of the centre of texel (col, row) of an N x N normtexture.
-Vec2 TexelCentreMm(double col, double row, int n, double sample_size_mm);
+// Plate position (mm) of the center of texel (col, row) of an N x N normtexture.
+Vec2 TexelCenterMm(double col, double row, int n, double sample_size_mm);
 
-// Bilinear sample, OpenCV pixel-centre convention, clamped to the edge; returns false if (x, y)
+// Bilinear sample, OpenCV pixel-center convention, clamped to the edge; returns false if (x, y)
 // is more than half a pixel outside the image.
 bool SampleBilinear(const Image& image, double x, double y, float* out);
 

@@ -48,7 +48,7 @@ std::pair<double, double> HomographyError(const Eigen::Matrix3d& a, const Eigen:
   return {std::sqrt(ss / 121), mx};
 }
 
-// Fraction of the sample (64 x 64 grid at z = 0) whose line of sight to the camera centre crosses
+// Fraction of the sample (64 x 64 grid at z = 0) whose line of sight to the camera center crosses
 // a marker's printed area (detection square enlarged by 1/4: the quiet zone of tag36h11) at the
 // marker's height: such texels show the marker, not the cloth, in this photo.
 double OccludedFraction(const Board& board, const PhotoGeometry& g) {
@@ -67,7 +67,7 @@ double OccludedFraction(const Board& board, const PhotoGeometry& g) {
         for (int k = 0; k < 4 && inside; ++k) {
           const Vec2 a = c + 1.25 * (m.corners_mm[k] - c), b = c + 1.25 * (m.corners_mm[(k + 1) % 4] - c);
           const Vec2 e = b - a, d = q.head<2>() - a;
-          // Same side of every edge as the centre (convex quad, either orientation).
+          // Same side of every edge as the center (convex quad, either orientation).
           const double side = e.x() * d.y() - e.y() * d.x(), ref = e.x() * (c - a).y() - e.y() * (c - a).x();
           inside = side * ref >= 0;
         }
@@ -173,7 +173,7 @@ json RegisterSummary::ToJson() const {
             {"photos_failed", photos_failed},
             {"shape", {{"views", views}, {"lights", lights}, {"height", height}, {"width", width}, {"channels", channels}}},
             {"filled", filled_j},
-            {"times_s", times.ToJson()},
+            {"seconds", times.ToJson()},
             {"photos", ph}};
   if (lattice) {
     j["lattice"] = lattice->ToJson();
@@ -182,304 +182,381 @@ json RegisterSummary::ToJson() const {
   return j;
 }
 
+std::string RegisterSummary::Report() const {
+  std::string r = fmt::format("registered {}/{} photos ({} views x {} lights x {}x{} texels, {} filled)\n", photos_ok,
+                              photos, views, lights, width, height, filled.size());
+  if (lattice)
+    r += fmt::format("lattice: a1 = ({:.3f}, {:.3f}), a2 = ({:.3f}, {:.3f}) texels, {} yarn cell(s) per repeat\n",
+                     lattice->a1.x(), lattice->a1.y(), lattice->a2.x(), lattice->a2.y(), lattice->yarn_cells_per_repeat);
+  for (const auto& p : reports)
+    if (!p.ok) r += fmt::format("FAILED {}: {}\n", p.file, p.error);
+  r += fmt::format("time: {}\n", times.Report());
+  return r;
+}
+
 std::vector<TagDetection> DetectInImage(const std::filesystem::path& image, const TagDetectorOptions& options) {
   TagDetector det(options);
   return det.Detect(ReadPhoto(image, nullptr));
 }
 
-RegisterSummary RegisterPhotos(const std::filesystem::path& manifest_path, const std::filesystem::path& output,
-                               const RegisterOptions& options, const Reporter& reporter) {
-  options.Check();
-  RegisterSummary sum;
-  Timer timer;
+namespace {
+
+// Runs the pipeline's phases; one member function each, in RegisterPhotos' order.
+class Registration {
+ public:
+  Registration(const RegisterOptions& options, const std::filesystem::path& manifest_path, const Reporter& reporter,
+               RegisterSummary& sum)
+      : o_(options), manifest_path_(manifest_path), dir_(manifest_path.parent_path()), rep_(reporter), sum_(sum) {}
+
   // Fail fast on malformed inputs, before any work.
-  const Manifest manifest = ReadManifest(manifest_path);
-  const std::filesystem::path dir = manifest_path.parent_path();
-  if (manifest.photos.empty()) ThrowBadInput("'{}': the manifest lists no photos", manifest_path.string());
-  const Board board = ReadBoard(dir / manifest.board_file);
-  std::map<std::string, PhotoTruth> truth;
-  if (!options.truth.empty())
-    for (auto& t : ReadTruth(options.truth)) truth.emplace(t.file, std::move(t));
-  TagDetectorOptions dopt = options.detector;
-  if (!options.family_override) dopt.family = board.family;
-  dopt.Check();
-  const double S = board.sample_size_mm;
-  sum.times.Add("read_inputs", timer.Seconds());
+  void ReadInputs() {
+    manifest_ = ReadManifest(manifest_path_);
+    if (manifest_.photos.empty()) ThrowBadInput("'{}': the manifest lists no photos", manifest_path_.string());
+    board_ = ReadBoard(dir_ / manifest_.board_file);
+    if (!o_.truth.empty())
+      for (auto& t : ReadTruth(o_.truth)) truth_.emplace(t.file, std::move(t));
+    detector_ = o_.detector;
+    if (!o_.family_override) detector_.family = board_.family;
+    detector_.Check();
+    S_ = board_.sample_size_mm;
+    const int np = static_cast<int>(manifest_.photos.size());
+    sum_.photos = np;
+    sum_.reports.resize(static_cast<std::size_t>(np));
+    std::set<std::pair<int, int>> seen_pairs;
+    for (int i = 0; i < np; ++i) {
+      const PhotoEntry& e = manifest_.photos[i];
+      PhotoReport& r = sum_.reports[i];
+      r.file = e.file;
+      r.view_index = e.view_index;
+      r.light_index = e.light_index;
+      if (!seen_pairs.insert({e.view_index, e.light_index}).second)
+        ThrowBadInput("'{}': photos[{}] ('{}'): a second photo for view {} and light {}: remove the duplicate entry",
+                      manifest_path_.string(), i, e.file, e.view_index, e.light_index);
+    }
+  }
 
   // Phase 1: detection and geometry for every photo, in parallel (one detector per thread).
-  timer.Restart();
-  const int np = static_cast<int>(manifest.photos.size());
-  sum.photos = np;
-  sum.reports.resize(static_cast<std::size_t>(np));
-  std::vector<PhotoGeometry> geoms(static_cast<std::size_t>(np));
-  std::set<std::pair<int, int>> seen_pairs;
-  for (int i = 0; i < np; ++i) {
-    const PhotoEntry& e = manifest.photos[i];
-    PhotoReport& r = sum.reports[i];
-    r.file = e.file;
-    r.view_index = e.view_index;
-    r.light_index = e.light_index;
-    if (!seen_pairs.insert({e.view_index, e.light_index}).second)
-      ThrowBadInput("'{}': photos[{}] ('{}'): a second photo for view {} and light {}: remove the duplicate entry",
-                    manifest_path.string(), i, e.file, e.view_index, e.light_index);
-  }
-  std::vector<std::unique_ptr<TagDetector>> detectors(static_cast<std::size_t>(omp_get_max_threads()));
-  std::atomic<bool> cancelled{false};
-  std::atomic<int> done{0};
-  std::mutex progress_mutex;
-  auto progress = [&](const char* stage, int total) {
-    const int d = ++done;
-    std::lock_guard<std::mutex> lock(progress_mutex);
-    if (cancelled) return;
-    try {
-      reporter.Progress(static_cast<std::size_t>(d), static_cast<std::size_t>(total), stage);
-    } catch (const Cancelled&) {
-      cancelled = true;
-    }
-  };
+  void DetectAndFit() {
+    const int np = sum_.photos;
+    geoms_.assign(static_cast<std::size_t>(np), PhotoGeometry());
+    std::vector<std::unique_ptr<TagDetector>> detectors(static_cast<std::size_t>(omp_get_max_threads()));
+    done_ = 0;
 #pragma omp parallel for schedule(dynamic, 1)
-  for (int i = 0; i < np; ++i) {
-    if (cancelled) continue;
-    const PhotoEntry& e = manifest.photos[i];
-    PhotoReport& r = sum.reports[i];
-    try {
-      auto& det = detectors[static_cast<std::size_t>(omp_get_thread_num())];
-      if (!det) det = std::make_unique<TagDetector>(dopt);
-      const Image im = ReadPhoto(dir / e.file, &r.warnings);
-      const bool pose = options.use_intrinsics && e.camera.fx > 0;
-      if (pose && (im.width != e.camera.width || im.height != e.camera.height))
-        ThrowBadInput("photo is {}x{} but its camera model in the manifest is {}x{}", im.width, im.height,
-                      e.camera.width, e.camera.height);
-      r.detections = det->Detect(im);
-      const PhotoGeometry g =
-          EstimateGeometry(board, r.detections, pose ? std::optional<CameraModel>(e.camera) : std::nullopt,
-                           options.geometry, &r.warnings);
-      r.used_ids = g.used_ids;
-      r.rejected_ids = g.rejected_ids;
-      r.rms_px = g.rms_px;
-      r.has_pose = g.has_pose;
-      r.homography = g.surface_homography;
-      r.rotation = g.rotation;
-      r.translation = g.translation;
-      if (auto t = truth.find(e.file); t != truth.end()) {
-        double ss = 0;
-        int n = 0;
-        for (const auto& d : r.detections)
-          if (auto c = t->second.marker_corners_px.find(d.id); c != t->second.marker_corners_px.end())
-            for (int k = 0; k < 4; ++k) ss += (d.corners[k] - c->second[k]).squaredNorm(), ++n;
-        if (n) r.truth_corner_rms_px = std::sqrt(ss / n);
-        std::tie(r.truth_homography_rms_px, r.truth_homography_max_px) =
-            HomographyError(g.surface_homography, t->second.plate_to_image, S);
+    for (int i = 0; i < np; ++i) {
+      if (cancelled_) continue;
+      PhotoReport& r = sum_.reports[i];
+      try {
+        auto& det = detectors[static_cast<std::size_t>(omp_get_thread_num())];
+        if (!det) det = std::make_unique<TagDetector>(detector_);
+        geoms_[i] = FitPhoto(manifest_.photos[i], *det, r);
+        r.ok = true;
+      } catch (const Cancelled&) {
+        cancelled_ = true;
+      } catch (const Error& ex) {
+        r.ok = false;
+        r.error = ex.what();
+      } catch (const std::exception& ex) {
+        r.ok = false;
+        r.error = fmt::format("internal error: {}", ex.what());
       }
-      // The whole sample must be in view: its border projects inside the photo (the map is a
-      // homography plus radial distortion, so the border bounds the region).
-      if (options.max_invalid_fraction == 0)
-        for (int k = 0; k < 4 * 32; ++k) {
-          const double s = (k % 32 + 0.5) / 32 * S - S / 2;
-          const Vec2 q = k < 32 ? Vec2(s, -S / 2) : k < 64 ? Vec2(S / 2, s) : k < 96 ? Vec2(-s, S / 2) : Vec2(-S / 2, -s);
-          Vec2 px;
-          if (!g.Project(Vec3(q.x(), q.y(), 0), &px) || px.x() < -0.5 || px.y() < -0.5 || px.x() > im.width - 0.5 ||
-              px.y() > im.height - 0.5)
-            ThrowBadInput("the sample region is not fully inside the photo (plate point ({:.1f}, {:.1f}) mm maps to "
-                          "pixel ({:.1f}, {:.1f}))",
-                          q.x(), q.y(), px.x(), px.y());
-        }
-      if (const double occ = OccludedFraction(board, g); occ > 0)
-        r.warnings.push_back(fmt::format("{:.1f}% of the sample is hidden behind raised markers in this view (texels at "
-                                         "the edge show the marker)",
-                                         100 * occ));
-      geoms[i] = g;
-      r.ok = true;
-    } catch (const Cancelled&) {
-      cancelled = true;
-    } catch (const Error& ex) {
-      r.ok = false;
-      r.error = ex.what();
-    } catch (const std::exception& ex) {
-      r.ok = false;
-      r.error = fmt::format("internal error: {}", ex.what());
+      Progress("detect", np);
     }
-    progress("detect", np);
+    if (cancelled_) throw Cancelled();
   }
-  if (cancelled) throw Cancelled();
-  sum.times.Add("detect_and_fit", timer.Seconds());
 
-  // The dataset's samplings: views and lights with at least one registered photo.
-  std::set<int> view_set, light_set;
-  for (const auto& r : sum.reports)
-    if (r.ok) view_set.insert(r.view_index), light_set.insert(r.light_index);
-  for (const auto& r : sum.reports)
-    if (!r.ok) reporter.Warn("'{}': {}", r.file, r.error);
-  if (view_set.empty())
-    ThrowBadInput("'{}': none of the {} photos registered (first failure: '{}': {})", manifest_path.string(), np,
-                  sum.reports[0].file, sum.reports[0].error);
-  const std::vector<int> view_list(view_set.begin(), view_set.end()), light_list(light_set.begin(), light_set.end());
-  const Sampling views = manifest.views.Subset(view_list), lights = manifest.lights.Subset(light_list);
-  std::map<std::pair<int, int>, int> photo_of;  // (view, light) manifest indices -> photo
-  for (int i = 0; i < np; ++i)
-    if (sum.reports[i].ok) photo_of[{manifest.photos[i].view_index, manifest.photos[i].light_index}] = i;
+  // The dataset's samplings: views and lights with at least one registered photo; the reference
+  // view (the most frontal) comes first, as the lattice is estimated on it.
+  void ChooseSamplings() {
+    std::set<int> view_set, light_set;
+    for (const auto& r : sum_.reports)
+      if (r.ok) view_set.insert(r.view_index), light_set.insert(r.light_index);
+    for (const auto& r : sum_.reports)
+      if (!r.ok) rep_.Warn("'{}': {}", r.file, r.error);
+    if (view_set.empty())
+      ThrowBadInput("'{}': none of the {} photos registered (first failure: '{}': {})", manifest_path_.string(),
+                    sum_.photos, sum_.reports[0].file, sum_.reports[0].error);
+    view_list_.assign(view_set.begin(), view_set.end());
+    light_list_.assign(light_set.begin(), light_set.end());
+    views_ = manifest_.views.Subset(view_list_);
+    lights_ = manifest_.lights.Subset(light_list_);
+    for (int i = 0; i < sum_.photos; ++i)
+      if (sum_.reports[i].ok) photo_of_[{manifest_.photos[i].view_index, manifest_.photos[i].light_index}] = i;
+    reference_ = view_list_[0];
+    for (int v : view_list_)
+      if (manifest_.views[v].z() > manifest_.views[reference_].z()) reference_ = v;
+    sum_.reference_view = o_.tile_average ? reference_ : -1;
+  }
 
-  // Phase 2, view by view (one view's images in memory): rectify, radiometry, tile averaging.
-  int ref = view_list[0];
-  for (int v : view_list)
-    if (manifest.views[v].z() > manifest.views[ref].z()) ref = v;
-  sum.reference_view = options.tile_average ? ref : -1;
-  std::vector<int> order = {ref};
-  for (int v : view_list)
-    if (v != ref) order.push_back(v);
+  // Phase 2, view by view (one view's images in memory): rectify, radiometry, tile averaging, write.
+  void RegisterViews(const std::filesystem::path& output) {
+    std::vector<int> order = {reference_};
+    for (int v : view_list_)
+      if (v != reference_) order.push_back(v);
+    thumbs_.assign(view_list_.size(), Image());
+    done_ = 0;
+    for (int v : order) {
+      Timer t;
+      std::vector<Image> tex;
+      std::map<int, const Image*> by_light = RectifyView(v, tex);
+      sum_.times.Add("rectify", t.Seconds());
+      std::map<int, Image> averaged;
+      if (o_.tile_average) {
+        t.Restart();
+        if (v == reference_) EstimateReferenceLattice(v, by_light);
+        for (const auto& [l, im] : by_light) {
+          AveragedTile at = AverageTiles(*im, *sum_.lattice, o_.tiles);
+          averaged[l] = o_.tile_output == "tile" ? std::move(at.tile) : TileImage(at, *sum_.lattice, im->width, im->height);
+        }
+        for (auto& [l, im] : averaged) by_light[l] = &im;
+        sum_.times.Add("tile_average", t.Seconds());
+      }
+      if (!writer_) OpenWriter(output, *by_light.begin()->second);
+      WriteView(v, by_light);
+    }
+    Timer t;
+    writer_->Commit();
+    sum_.times.Add("write", t.Seconds());
+    for (const auto& r : sum_.reports) (r.ok ? sum_.photos_ok : sum_.photos_failed)++;
+    if (o_.contact_sheet_thumb > 0) sum_.contact_sheet = ContactSheet(thumbs_, o_.contact_sheet_thumb);
+  }
 
-  std::unique_ptr<DatasetWriter> writer;
-  std::vector<Image> thumbs(view_list.size());
-  int channels = 0;
-  done = 0;
-  const int n_ok = static_cast<int>(photo_of.size());
-  for (int v : order) {
+ private:
+  // Reads one photo, detects its markers, fits its geometry and checks that the sample is in view.
+  PhotoGeometry FitPhoto(const PhotoEntry& e, const TagDetector& det, PhotoReport& r) const {
+    const Image im = ReadPhoto(dir_ / e.file, &r.warnings);
+    const bool pose = o_.use_intrinsics && e.camera.fx > 0;
+    if (pose && (im.width != e.camera.width || im.height != e.camera.height))
+      ThrowBadInput("photo is {}x{} but its camera model in the manifest is {}x{}", im.width, im.height,
+                    e.camera.width, e.camera.height);
+    r.detections = det.Detect(im);
+    const PhotoGeometry g = EstimateGeometry(board_, r.detections, pose ? std::optional<CameraModel>(e.camera) : std::nullopt,
+                                             o_.geometry, &r.warnings);
+    r.used_ids = g.used_ids;
+    r.rejected_ids = g.rejected_ids;
+    r.rms_px = g.rms_px;
+    r.has_pose = g.has_pose;
+    r.homography = g.surface_homography;
+    r.rotation = g.rotation;
+    r.translation = g.translation;
+    if (auto t = truth_.find(e.file); t != truth_.end()) CompareWithTruth(t->second, g, r);
+    // The whole sample must be in view: its border projects inside the photo (the map is a
+    // homography plus radial distortion, so the border bounds the region).
+    if (o_.max_invalid_fraction == 0)
+      for (int k = 0; k < 4 * 32; ++k) {
+        const double s = (k % 32 + 0.5) / 32 * S_ - S_ / 2;
+        const Vec2 q = k < 32 ? Vec2(s, -S_ / 2) : k < 64 ? Vec2(S_ / 2, s) : k < 96 ? Vec2(-s, S_ / 2) : Vec2(-S_ / 2, -s);
+        Vec2 px;
+        if (!g.Project(Vec3(q.x(), q.y(), 0), &px) || px.x() < -0.5 || px.y() < -0.5 || px.x() > im.width - 0.5 ||
+            px.y() > im.height - 0.5)
+          ThrowBadInput("the sample region is not fully inside the photo (plate point ({:.1f}, {:.1f}) mm maps to "
+                        "pixel ({:.1f}, {:.1f}))",
+                        q.x(), q.y(), px.x(), px.y());
+      }
+    if (const double occ = OccludedFraction(board_, g); occ > 0)
+      r.warnings.push_back(fmt::format("{:.1f}% of the sample is hidden behind raised markers in this view (texels at "
+                                       "the edge show the marker)",
+                                       100 * occ));
+    return g;
+  }
+
+  void CompareWithTruth(const PhotoTruth& truth, const PhotoGeometry& g, PhotoReport& r) const {
+    double ss = 0;
+    int n = 0;
+    for (const auto& d : r.detections)
+      if (auto c = truth.marker_corners_px.find(d.id); c != truth.marker_corners_px.end())
+        for (int k = 0; k < 4; ++k) ss += (d.corners[k] - c->second[k]).squaredNorm(), ++n;
+    if (n) r.truth_corner_rms_px = std::sqrt(ss / n);
+    std::tie(r.truth_homography_rms_px, r.truth_homography_max_px) =
+        HomographyError(g.surface_homography, truth.plate_to_image, S_);
+  }
+
+  // Rectifies and normalizes every registered photo of view v (in parallel); returns the images
+  // by manifest light index (photos that fail here are dropped and reported).
+  std::map<int, const Image*> RectifyView(int v, std::vector<Image>& tex) {
     std::vector<int> photos;
-    for (int l : light_list)
-      if (auto it = photo_of.find({v, l}); it != photo_of.end()) photos.push_back(it->second);
-    std::vector<Image> tex(photos.size());
-    Timer t2;
+    for (int l : light_list_)
+      if (auto it = photo_of_.find({v, l}); it != photo_of_.end()) photos.push_back(it->second);
+    tex.assign(photos.size(), Image());
+    const int n_ok = static_cast<int>(photo_of_.size());
 #pragma omp parallel for schedule(dynamic, 1)
     for (std::size_t k = 0; k < photos.size(); ++k) {
-      if (cancelled) continue;
+      if (cancelled_) continue;
       const int i = photos[k];
-      PhotoReport& r = sum.reports[i];
+      PhotoReport& r = sum_.reports[i];
       try {
-        const Image im = ReadPhoto(dir / manifest.photos[i].file, nullptr);
-        const PhotoGeometry& g = geoms[i];
-        RectifyStats st;
-        tex[k] = Rectify(
-            im, [&g](const Vec2& p, Vec2* px) { return g.Project(Vec3(p.x(), p.y(), 0), px); }, S, options.rectify,
-            &st);
-        r.invalid_fraction = st.invalid_fraction;
-        r.max_footprint_px = st.max_footprint_px;
-        if (st.invalid_fraction > options.max_invalid_fraction)
-          ThrowBadInput("{:.1f}% of the texels fall outside the photo (limit {:.1f}%)", 100 * st.invalid_fraction,
-                        100 * options.max_invalid_fraction);
-        if (st.invalid_fraction > 0)
-          r.warnings.push_back(fmt::format("{:.2f}% of the texels fall outside the photo (edge values used)",
-                                           100 * st.invalid_fraction));
-        if (options.radiometry) {
-          ApplyRadiometry(tex[k], manifest.photos[i], S);
-        } else {
-          for (float& x : tex[k].pixels) x = static_cast<float>(x / manifest.photos[i].exposure);
-        }
+        tex[k] = RectifyPhoto(manifest_.photos[i], geoms_[i], r);
       } catch (const Cancelled&) {
-        cancelled = true;
+        cancelled_ = true;
       } catch (const std::exception& ex) {
         r.ok = false;
         r.error = ex.what();
         tex[k] = Image();
       }
-      progress("rectify", n_ok);
+      Progress("rectify", n_ok);
     }
-    if (cancelled) throw Cancelled();
-    sum.times.Add("rectify", t2.Seconds());
-    // Drop photos that failed here (I/O, light below the horizon).
+    if (cancelled_) throw Cancelled();
     std::map<int, const Image*> by_light;
     for (std::size_t k = 0; k < photos.size(); ++k)
-      if (sum.reports[photos[k]].ok) by_light[manifest.photos[photos[k]].light_index] = &tex[k];
+      if (sum_.reports[photos[k]].ok) by_light[manifest_.photos[photos[k]].light_index] = &tex[k];
     if (by_light.empty())
-      ThrowBadInput("view {}: every photo failed at rectification (first: '{}': {})", v,
-                    sum.reports[photos[0]].file, sum.reports[photos[0]].error);
-    const Image& any = *by_light.begin()->second;
-    if (channels == 0) channels = any.channels;
+      ThrowBadInput("view {}: every photo failed at rectification (first: '{}': {})", v, sum_.reports[photos[0]].file,
+                    sum_.reports[photos[0]].error);
+    if (channels_ == 0) channels_ = by_light.begin()->second->channels;
     for (const auto& [l, im] : by_light)
-      if (im->channels != channels)
-        ThrowBadInput("photos have {} and {} channels: all photos must have the same channels", channels, im->channels);
+      if (im->channels != channels_)
+        ThrowBadInput("photos have {} and {} channels: all photos must have the same channels", channels_, im->channels);
+    return by_light;
+  }
 
-    // Tile averaging: lattice once, on the reference view averaged over its lights.
-    Timer t3;
-    std::map<int, Image> averaged;
-    if (options.tile_average) {
-      if (v == ref) {
-        const int n = any.width;
-        std::vector<float> grey(static_cast<std::size_t>(n) * n, 0.0f);
-        for (const auto& [l, im] : by_light) {
-          // Normalise each light by its mean so that no single bright light dominates.
-          double mean = 0;
-          for (float x : im->pixels) mean += x;
-          mean = mean > 0 ? mean / static_cast<double>(im->pixels.size()) : 1;
-          for (std::size_t p = 0; p < grey.size(); ++p) {
-            double g = 0;
-            for (int c = 0; c < channels; ++c) g += im->pixels[p * channels + c];
-            grey[p] += static_cast<float>(g / (channels * mean));
-          }
-        }
-        sum.lattice = EstimateLattice(grey, n, n, options.lattice);
-        reporter.Info("lattice on view {}: a1 = ({:.3f}, {:.3f}), a2 = ({:.3f}, {:.3f}) texels, {} yarn cell(s) per repeat",
-                      v, sum.lattice->a1.x(), sum.lattice->a1.y(), sum.lattice->a2.x(), sum.lattice->a2.y(),
-                      sum.lattice->yarn_cells_per_repeat);
-      }
-      for (const auto& [l, im] : by_light) {
-        AveragedTile t = AverageTiles(*im, *sum.lattice, options.tiles);
-        averaged[l] = options.tile_output == "tile" ? std::move(t.tile) : TileImage(t, *sum.lattice, im->width, im->height);
-      }
-      for (auto& [l, im] : averaged) by_light[l] = &im;
-      sum.times.Add("tile_average", t3.Seconds());
+  Image RectifyPhoto(const PhotoEntry& e, const PhotoGeometry& g, PhotoReport& r) const {
+    const Image im = ReadPhoto(dir_ / e.file, nullptr);
+    RectifyStats st;
+    Image tex = Rectify(
+        im, [&g](const Vec2& p, Vec2* px) { return g.Project(Vec3(p.x(), p.y(), 0), px); }, S_, o_.rectify, &st);
+    r.invalid_fraction = st.invalid_fraction;
+    r.max_footprint_px = st.max_footprint_px;
+    if (st.invalid_fraction > o_.max_invalid_fraction)
+      ThrowBadInput("{:.1f}% of the texels fall outside the photo (limit {:.1f}%)", 100 * st.invalid_fraction,
+                    100 * o_.max_invalid_fraction);
+    if (st.invalid_fraction > 0)
+      r.warnings.push_back(fmt::format("{:.2f}% of the texels fall outside the photo (edge values used)",
+                                       100 * st.invalid_fraction));
+    if (o_.radiometry) {
+      ApplyRadiometry(tex, e, S_);
+    } else {
+      for (float& x : tex.pixels) x = static_cast<float>(x / e.exposure);
     }
+    return tex;
+  }
 
-    const Image& first = *by_light.begin()->second;
-    if (!writer) {
-      sum.width = first.width;
-      sum.height = first.height;
-      sum.channels = channels;
-      sum.views = views.size();
-      sum.lights = lights.size();
-      DatasetInfo info;
-      info.units = options.radiometry ? "brdf_per_sr" : "relative";
-      info.cos_theta_i_included = false;
-      info.channel_names = channels == 3 ? std::vector<std::string>{"R", "G", "B"}
-                                         : channels == 1 ? std::vector<std::string>{"Y"} : std::vector<std::string>{};
-      if (info.channel_names.empty())
-        for (int c = 0; c < channels; ++c) info.channel_names.push_back(fmt::format("C{}", c));
-      info.texel_size_mm = S / options.rectify.resolution;
-      if (options.tile_average && options.tile_output == "tile")
-        info.texel_size_mm *= std::max(sum.lattice->a1.norm(), sum.lattice->a2.norm()) / first.width;
-      info.provenance = {{"creator", "btf-register"},
-                         {"manifest", manifest_path.string()},
-                         {"board", (dir / manifest.board_file).string()},
-                         {"sample_size_mm", S},
-                         {"resolution", options.rectify.resolution},
-                         {"radiometry", options.radiometry},
-                         {"tile_average", options.tile_average},
-                         {"tile_output", options.tile_output}};
-      if (sum.lattice) info.provenance["lattice"] = sum.lattice->ToJson();
-      DatasetWriteOptions wo = options.write;
-      if (wo.creator == "libbtf") wo.creator = "btf-register";
-      writer = std::make_unique<DatasetWriter>(output, views, lights, first.height, first.width, channels, info, wo);
+  // The weave lattice, once, on the reference view averaged over its lights (each light
+  // normalized by its mean so that no single bright light dominates).
+  void EstimateReferenceLattice(int v, const std::map<int, const Image*>& by_light) {
+    const int n = by_light.begin()->second->width;
+    std::vector<float> gray(static_cast<std::size_t>(n) * n, 0.0f);
+    for (const auto& [l, im] : by_light) {
+      double mean = 0;
+      for (float x : im->pixels) mean += x;
+      mean = mean > 0 ? mean / static_cast<double>(im->pixels.size()) : 1;
+      for (std::size_t p = 0; p < gray.size(); ++p) {
+        double g = 0;
+        for (int c = 0; c < channels_; ++c) g += im->pixels[p * channels_ + c];
+        gray[p] += static_cast<float>(g / (channels_ * mean));
+      }
     }
-    const int vi = static_cast<int>(std::lower_bound(view_list.begin(), view_list.end(), v) - view_list.begin());
+    sum_.lattice = EstimateLattice(gray, n, n, o_.lattice);
+    rep_.Info("lattice on view {}: a1 = ({:.3f}, {:.3f}), a2 = ({:.3f}, {:.3f}) texels, {} yarn cell(s) per repeat", v,
+              sum_.lattice->a1.x(), sum_.lattice->a1.y(), sum_.lattice->a2.x(), sum_.lattice->a2.y(),
+              sum_.lattice->yarn_cells_per_repeat);
+  }
+
+  void OpenWriter(const std::filesystem::path& output, const Image& first) {
+    sum_.width = first.width;
+    sum_.height = first.height;
+    sum_.channels = channels_;
+    sum_.views = views_.size();
+    sum_.lights = lights_.size();
+    DatasetInfo info;
+    info.units = o_.radiometry ? "brdf_per_sr" : "relative";
+    info.cos_theta_i_included = false;
+    info.channel_names = channels_ == 3 ? std::vector<std::string>{"R", "G", "B"}
+                                        : channels_ == 1 ? std::vector<std::string>{"Y"} : std::vector<std::string>{};
+    if (info.channel_names.empty())
+      for (int c = 0; c < channels_; ++c) info.channel_names.push_back(fmt::format("C{}", c));
+    info.texel_size_mm = S_ / o_.rectify.resolution;
+    if (o_.tile_average && o_.tile_output == "tile")
+      info.texel_size_mm *= std::max(sum_.lattice->a1.norm(), sum_.lattice->a2.norm()) / first.width;
+    info.provenance = {{"creator", "btf-register"},
+                       {"manifest", manifest_path_.string()},
+                       {"board", (dir_ / manifest_.board_file).string()},
+                       {"sample_size_mm", S_},
+                       {"resolution", o_.rectify.resolution},
+                       {"radiometry", o_.radiometry},
+                       {"tile_average", o_.tile_average},
+                       {"tile_output", o_.tile_output}};
+    if (sum_.lattice) info.provenance["lattice"] = sum_.lattice->ToJson();
+    DatasetWriteOptions wo = o_.write;
+    if (wo.creator == "libbtf") wo.creator = "btf-register";
+    writer_ = std::make_unique<DatasetWriter>(output, views_, lights_, first.height, first.width, channels_, info, wo);
+  }
+
+  // Writes view v's images; a light without a registered photo is filled from the registered
+  // light of this view nearest in angle (listed in `filled`).
+  void WriteView(int v, const std::map<int, const Image*>& by_light) {
+    const int vi = static_cast<int>(std::lower_bound(view_list_.begin(), view_list_.end(), v) - view_list_.begin());
     const Image* brightest = nullptr;
     double best = -1;
-    for (int li = 0; li < static_cast<int>(light_list.size()); ++li) {
-      const int l = light_list[li];
+    for (int li = 0; li < static_cast<int>(light_list_.size()); ++li) {
+      const int l = light_list_[li];
       const Image* img = nullptr;
       if (auto it = by_light.find(l); it != by_light.end()) {
         img = it->second;
       } else {
-        // Fill from the registered light of this view nearest in angle.
         double best_dot = -2;
         for (const auto& [l2, im2] : by_light) {
-          const double d = manifest.lights[l2].dot(manifest.lights[l]);
+          const double d = manifest_.lights[l2].dot(manifest_.lights[l]);
           if (d > best_dot) best_dot = d, img = im2;
         }
-        sum.filled.emplace_back(v, l);
+        sum_.filled.emplace_back(v, l);
       }
-      if (img->width != sum.width || img->height != sum.height || img->channels != channels)
-        throw Error(ExitCode::kInternal, "register: image shape changed between views");
-      writer->WriteImage(vi, li, img->pixels.data());
+      BTF_CHECK(img->width == sum_.width && img->height == sum_.height && img->channels == channels_);
+      writer_->WriteImage(vi, li, img->pixels.data());
       double mean = 0;
       for (float x : img->pixels) mean += x;
       if (mean > best) best = mean, brightest = img;
     }
-    if (options.contact_sheet_thumb > 0 && brightest) thumbs[vi] = Thumbnail(*brightest, options.contact_sheet_thumb);
+    if (o_.contact_sheet_thumb > 0 && brightest) thumbs_[vi] = Thumbnail(*brightest, o_.contact_sheet_thumb);
   }
-  Timer t4;
-  writer->Commit();
-  sum.times.Add("write", t4.Seconds());
-  for (const auto& r : sum.reports) (r.ok ? sum.photos_ok : sum.photos_failed)++;
-  if (options.contact_sheet_thumb > 0) sum.contact_sheet = ContactSheet(thumbs, options.contact_sheet_thumb);
+
+  // Thread-safe progress from parallel loops; a cancellation stops the remaining iterations.
+  void Progress(const char* stage, int total) {
+    const int d = ++done_;
+    std::lock_guard<std::mutex> lock(progress_mutex_);
+    if (cancelled_) return;
+    try {
+      rep_.Progress(static_cast<std::size_t>(d), static_cast<std::size_t>(total), stage);
+    } catch (const Cancelled&) {
+      cancelled_ = true;
+    }
+  }
+
+  const RegisterOptions& o_;
+  const std::filesystem::path manifest_path_, dir_;
+  const Reporter& rep_;
+  RegisterSummary& sum_;
+  Manifest manifest_;
+  Board board_;
+  std::map<std::string, PhotoTruth> truth_;
+  TagDetectorOptions detector_;
+  double S_ = 0;  // sample side, mm
+  std::vector<PhotoGeometry> geoms_;
+  std::vector<int> view_list_, light_list_;
+  Sampling views_, lights_;
+  std::map<std::pair<int, int>, int> photo_of_;  // (view, light) manifest indices -> photo
+  int reference_ = 0;
+  int channels_ = 0;
+  std::unique_ptr<DatasetWriter> writer_;
+  std::vector<Image> thumbs_;
+  std::atomic<bool> cancelled_{false};
+  std::atomic<int> done_{0};
+  std::mutex progress_mutex_;
+};
+
+}  // namespace
+
+RegisterSummary RegisterPhotos(const RegisterOptions& options, const std::filesystem::path& manifest_path,
+                               const std::filesystem::path& output, const Reporter& reporter) {
+  options.Check();
+  RegisterSummary sum;
+  Registration reg(options, manifest_path, reporter, sum);
+  Timer timer;
+  reg.ReadInputs();
+  sum.times.Add("read_inputs", timer.Seconds());
+  timer.Restart();
+  reg.DetectAndFit();
+  sum.times.Add("detect_and_fit", timer.Seconds());
+  reg.ChooseSamplings();
+  reg.RegisterViews(output);
   return sum;
 }
 

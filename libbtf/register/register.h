@@ -68,13 +68,14 @@ struct PhotoReport {
 struct RegisterSummary {
   int photos = 0, photos_ok = 0, photos_failed = 0;
   int views = 0, lights = 0, width = 0, height = 0, channels = 0;
-  std::vector<std::pair<int, int>> filled;  // (view, light) manifest indices filled from a neighbour
+  std::vector<std::pair<int, int>> filled;  // (view, light) manifest indices filled from a neighbor
   std::optional<Lattice> lattice;
   int reference_view = -1;                 // manifest view index used for the lattice
   std::vector<PhotoReport> reports;
   Image contact_sheet;                     // empty unless contact_sheet_thumb > 0 and a view registered
   PhaseTimes times;
   nlohmann::json ToJson() const;           // the registration report (docs/btf-register.md)
+  std::string Report() const;              // what btf-register run prints
 };
 
 // Reads the manifest and its board (malformed: btf::Error bad input, before any work), registers
@@ -82,8 +83,8 @@ struct RegisterSummary {
 // summary; the dataset holds the views and lights with at least one registered photo, and pairs
 // without one are filled from the nearest registered light of the same view (listed in `filled`).
 // Throws btf::Error (bad input) if no photo registers.
-RegisterSummary RegisterPhotos(const std::filesystem::path& manifest, const std::filesystem::path& output,
-                               const RegisterOptions& options, const Reporter& reporter = {});
+RegisterSummary RegisterPhotos(const RegisterOptions& options, const std::filesystem::path& manifest,
+                               const std::filesystem::path& output, const Reporter& reporter = {});
 
 // Detection only (btf-register detect).
 std::vector<TagDetection> DetectInImage(const std::filesystem::path& image, const TagDetectorOptions& options);

@@ -32,7 +32,6 @@ FamilyPtr OpenFamily(const std::string& name) {
 
 }  // namespace
 
-int TagFamilySize(const std::string& family) { return static_cast<int>(OpenFamily(family)->ncodes); }
 
 TagBitmap RenderTag(const std::string& family, int id) {
   const FamilyPtr f = OpenFamily(family);

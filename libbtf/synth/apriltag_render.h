@@ -19,7 +19,5 @@ struct TagBitmap {
 // Decodes code `id` of `family` ("tag36h11", "tag25h9", "tag16h5", "tagStandard41h12") into its
 // module grid. Throws btf::Error (usage) for an unknown family or an id outside the family.
 TagBitmap RenderTag(const std::string& family, int id);
-// Number of codes in the family.
-int TagFamilySize(const std::string& family);
 
 }  // namespace btf

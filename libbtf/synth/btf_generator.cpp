@@ -8,15 +8,6 @@
 
 namespace btf {
 
-double HashUniform(std::uint64_t seed, std::uint64_t a, std::uint64_t b) {
-  std::uint64_t z = seed * 0x9E3779B97F4A7C15ull ^ (a + 0x632BE59BD9B4E019ull) * 0xBF58476D1CE4E5B9ull;
-  z ^= (b + 0x94D049BB133111EBull) * 0xD6E8FEB86659FD93ull;
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-  z ^= z >> 31;
-  return static_cast<double>(z >> 11) * (1.0 / 9007199254740992.0);
-}
-
 PatternWarp::PatternWarp(double amplitude, std::uint64_t seed) : amplitude_(amplitude) {
   if (amplitude_ <= 0) return;
   // Four plane waves with periods of 2.5 to 7 tiles in random directions: smooth within a tile,
@@ -63,9 +54,8 @@ nlohmann::json BtfSummary::ToJson() const {
           {"samples_per_axis", samples},
           {"texel_values", texel_values},
           {"model_evaluations", model_evaluations},
-          {"seconds", seconds},
-          {"texel_values_per_second", seconds > 0 ? texel_values / seconds : 0.0},
-          {"times", times.ToJson()}};
+          {"texel_values_per_second", times.Total() > 0 ? texel_values / times.Total() : 0.0},
+          {"seconds", times.ToJson()}};
 }
 
 Vec2 TexelSampleUv(const BtfOptions& o, int x, int y, int i, int j) {
@@ -146,9 +136,32 @@ DatasetInfo GeneratedBtfInfo(const SvbrdfModel& model, const BtfOptions& o) {
   return info;
 }
 
-Dataset GenerateBtf(const SvbrdfModel& model, const BtfOptions& o, const Reporter& reporter, BtfSummary* summary) {
+namespace {
+
+BtfSummary MakeSummary(const BtfOptions& o, const PhaseTimes& times) {
+  const int N = o.resolution;
+  BtfSummary s;
+  s.views = o.views.size();
+  s.lights = o.lights.size();
+  s.resolution = N;
+  s.samples = o.samples;
+  s.texel_values = static_cast<std::uint64_t>(o.views.size()) * o.lights.size() * N * N;
+  s.model_evaluations = s.texel_values * o.samples * o.samples;
+  s.times = times;
+  return s;
+}
+
+}  // namespace
+
+std::string BtfSummary::Report() const {
+  const double t = times.Total();
+  return fmt::format("{} views x {} lights x {}^2 texels, {:.3g} texel values/s, {:.1f} s\n", views, lights, resolution,
+                     t > 0 ? texel_values / t : 0.0, t);
+}
+
+BtfSummary GenerateBtf(const BtfOptions& o, const SvbrdfModel& model, Dataset* out, const Reporter& reporter) {
   o.Check();
-  Timer total;
+  BTF_CHECK(out != nullptr);
   const int N = o.resolution;
   CheckAllocation(4.0 * o.views.size() * o.lights.size() * N * N * model.channels(), "generated BTF");
   Dataset ds(o.views, o.lights, N, N, model.channels(), GeneratedBtfInfo(model, o));
@@ -163,23 +176,13 @@ Dataset GenerateBtf(const SvbrdfModel& model, const BtfOptions& o, const Reporte
   }
   reporter.Progress(static_cast<std::size_t>(o.views.size()), static_cast<std::size_t>(o.views.size()), "views");
   times.Add("evaluate", t.Seconds());
-  if (summary) {
-    summary->views = o.views.size();
-    summary->lights = o.lights.size();
-    summary->resolution = N;
-    summary->samples = o.samples;
-    summary->texel_values = static_cast<std::uint64_t>(o.views.size()) * o.lights.size() * N * N;
-    summary->model_evaluations = summary->texel_values * o.samples * o.samples;
-    summary->seconds = total.Seconds();
-    summary->times = times;
-  }
-  return ds;
+  *out = std::move(ds);
+  return MakeSummary(o, times);
 }
 
-BtfSummary WriteGeneratedBtf(const SvbrdfModel& model, const BtfOptions& o, const std::filesystem::path& path,
+BtfSummary WriteGeneratedBtf(const BtfOptions& o, const SvbrdfModel& model, const std::filesystem::path& path,
                              const Reporter& reporter, const nlohmann::json& extra_provenance) {
   o.Check();
-  Timer total;
   const int N = o.resolution;
   DatasetInfo info = GeneratedBtfInfo(model, o);
   if (extra_provenance.is_object())
@@ -208,16 +211,7 @@ BtfSummary WriteGeneratedBtf(const SvbrdfModel& model, const BtfOptions& o, cons
   write_s += t.Seconds();
   times.Add("evaluate", eval_s);
   times.Add("write", write_s);
-  BtfSummary s;
-  s.views = o.views.size();
-  s.lights = o.lights.size();
-  s.resolution = N;
-  s.samples = o.samples;
-  s.texel_values = static_cast<std::uint64_t>(o.views.size()) * o.lights.size() * N * N;
-  s.model_evaluations = s.texel_values * o.samples * o.samples;
-  s.seconds = total.Seconds();
-  s.times = times;
-  return s;
+  return MakeSummary(o, times);
 }
 
 Dataset GenerateBrdf(const SvbrdfModel& model, const Sampling& views, const Sampling& lights) {

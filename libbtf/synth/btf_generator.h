@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "libbtf/core/dataset.h"
+#include "libbtf/core/hash.h"
 #include "libbtf/core/progress.h"
 #include "libbtf/core/timer.h"
 #include "libbtf/synth/model.h"
@@ -36,9 +37,6 @@ class PatternWarp {
   std::vector<Wave> waves_;
 };
 
-// Deterministic 64-bit hash -> uniform double in [0, 1) (SplitMix64 finaliser): jitter that is
-// the same whatever the thread count.
-double HashUniform(std::uint64_t seed, std::uint64_t a, std::uint64_t b = 0);
 
 struct BtfOptions {
   Sampling views = Sampling::Bonn81();   // view directions (default bonn81)
@@ -56,9 +54,9 @@ struct BtfSummary {
   int views = 0, lights = 0, resolution = 0, samples = 0;
   std::uint64_t texel_values = 0;       // V * L * N^2 texel values written
   std::uint64_t model_evaluations = 0;  // texel_values * S^2
-  double seconds = 0;
-  PhaseTimes times;
+  PhaseTimes times;                     // sample_positions, evaluate, write
   nlohmann::json ToJson() const;
+  std::string Report() const;  // one line: shape, rate, time
 };
 
 // Texture coordinates of sample (i, j) of texel (x, y) (row 0 = top): the exact positions used.
@@ -68,11 +66,11 @@ Vec2 TexelSampleUv(const BtfOptions& o, int x, int y, int i, int j);
 void GenerateViewSlot(const SvbrdfModel& model, const BtfOptions& options, int view, float* out);
 
 // The whole BTF in memory (tests, small jobs). Progress is reported per view.
-Dataset GenerateBtf(const SvbrdfModel& model, const BtfOptions& options, const Reporter& reporter = {},
-                    BtfSummary* summary = nullptr);
+BtfSummary GenerateBtf(const BtfOptions& options, const SvbrdfModel& model, Dataset* out,
+                       const Reporter& reporter = {});
 
 // Streams the BTF to a dataset file view by view (Bonn-size jobs do not fit in memory), atomically.
-BtfSummary WriteGeneratedBtf(const SvbrdfModel& model, const BtfOptions& options, const std::filesystem::path& path,
+BtfSummary WriteGeneratedBtf(const BtfOptions& options, const SvbrdfModel& model, const std::filesystem::path& path,
                              const Reporter& reporter = {}, const nlohmann::json& extra_provenance = {});
 
 // DatasetInfo for a generated BTF: units, texel size and provenance (model, sampling, supersampling).

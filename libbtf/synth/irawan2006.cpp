@@ -13,8 +13,24 @@ double Cross(const Vec2& a, const Vec2& b) { return a.x() * b.y() - a.y() * b.x(
 // Signed angle from p to q in (-pi, pi].
 double Angle(const Vec2& p, const Vec2& q) { return std::atan2(Cross(p, q), p.dot(q)); }
 
-// Roots t1 <= t2 of |a + t d|^2 = 1; false if the line misses or grazes the circle.
-bool CircleRoots(const Vec2& a, const Vec2& d, double* t1, double* t2) {
+// Signed area of unit disk ∩ triangle(O, a, b).
+double TriangleDiskArea(const Vec2& a, const Vec2& b) {
+  const Vec2 d = b - a;
+  double t1, t2;
+  if (!UnitCircleRoots(a, d, &t1, &t2) || t2 <= 0 || t1 >= 1) return 0.5 * Angle(a, b);  // pure sector
+  const double s1 = std::max(t1, 0.0), s2 = std::min(t2, 1.0);
+  const Vec2 p1 = a + s1 * d, p2 = a + s2 * d;
+  double area = 0.5 * Cross(p1, p2);            // the chord part inside the disk
+  if (s1 > 0) area += 0.5 * Angle(a, p1);       // sector before entering
+  if (s2 < 1) area += 0.5 * Angle(p2, b);       // sector after leaving
+  return area;
+}
+
+constexpr double kTwoPi = 2 * kPi;
+
+}  // namespace
+
+bool UnitCircleRoots(const Vec2& a, const Vec2& d, double* t1, double* t2) {
   const double A = d.squaredNorm();
   if (A <= 0) return false;
   const double B = a.dot(d);
@@ -30,23 +46,6 @@ bool CircleRoots(const Vec2& a, const Vec2& d, double* t1, double* t2) {
   *t2 = r2;
   return true;
 }
-
-// Signed area of unit disk ∩ triangle(O, a, b).
-double TriangleDiskArea(const Vec2& a, const Vec2& b) {
-  const Vec2 d = b - a;
-  double t1, t2;
-  if (!CircleRoots(a, d, &t1, &t2) || t2 <= 0 || t1 >= 1) return 0.5 * Angle(a, b);  // pure sector
-  const double s1 = std::max(t1, 0.0), s2 = std::min(t2, 1.0);
-  const Vec2 p1 = a + s1 * d, p2 = a + s2 * d;
-  double area = 0.5 * Cross(p1, p2);            // the chord part inside the disk
-  if (s1 > 0) area += 0.5 * Angle(a, p1);       // sector before entering
-  if (s2 < 1) area += 0.5 * Angle(p2, b);       // sector after leaving
-  return area;
-}
-
-constexpr double kTwoPi = 2 * kPi;
-
-}  // namespace
 
 double CircularSegmentArea(double theta) {
   theta = std::clamp(theta, 0.0, kTwoPi);
@@ -64,84 +63,23 @@ double DiskPolygonArea(const std::vector<Vec2>& poly) {
   return std::max(0.0, sum);
 }
 
-double DiskQuadAreaFiveCases(const std::array<Vec2, 4>& q, int* case_out) {
-  const double nan = std::numeric_limits<double>::quiet_NaN();
-  if (case_out) *case_out = 0;
-  std::array<bool, 4> inside{};
-  int n_inside = 0;
-  for (int k = 0; k < 4; ++k) n_inside += (inside[k] = q[k].squaredNorm() < 1);
-  std::array<int, 4> hits{};
-  std::array<Vec2, 4> first_hit;
-  std::array<double, 4> dist{};  // signed distance of O from edge k's line, > 0 = O on the inner side
-  int total = 0;
-  for (int k = 0; k < 4; ++k) {
-    const Vec2& a = q[k];
-    const Vec2 d = q[(k + 1) % 4] - a;
-    dist[k] = Cross(d, -a) / d.norm();
-    double t1, t2;
-    if (CircleRoots(a, d, &t1, &t2)) {
-      for (double t : {t1, t2})
-        if (t > 0 && t < 1) {
-          if (hits[k] == 0) first_hit[k] = a + t * d;
-          ++hits[k];
-        }
-    }
-    total += hits[k];
-  }
-  auto cap = [](double d) { return 2 * std::acos(std::clamp(d, -1.0, 1.0)); };  // cap angle beyond a line
-  if (total == 0 && n_inside == 0) {
-    const bool origin_in = std::all_of(dist.begin(), dist.end(), [](double d) { return d > 0; });
-    if (case_out) *case_out = origin_in ? 1 : 5;
-    return origin_in ? kPi : 0.0;
-  }
-  if (n_inside == 0 && total == 2) {
-    for (int k = 0; k < 4; ++k)
-      if (hits[k] == 2) {
-        if (case_out) *case_out = 2;
-        return CircularSegmentArea(kTwoPi - cap(dist[k]));
-      }
-  }
-  if (n_inside == 0 && total == 4) {
-    for (int k = 0; k < 4; ++k) {
-      const int k2 = (k + 1) % 4;
-      if (hits[k] == 2 && hits[k2] == 2) {
-        if (case_out) *case_out = 3;
-        return kPi - CircularSegmentArea(cap(dist[k])) - CircularSegmentArea(cap(dist[k2]));
-      }
-    }
-  }
-  if (n_inside == 1 && total == 2) {
-    for (int k = 0; k < 4; ++k) {
-      const int k2 = (k + 1) % 4;  // shared corner of edges k and k2 is q[k2]
-      if (hits[k] == 1 && hits[k2] == 1 && inside[k2]) {
-        const Vec2 P = first_hit[k], Q = first_hit[k2], K = q[k2];
-        const Vec2 chord = Q - P;
-        const double len = chord.norm();
-        if (len <= 0) return nan;
-        // Signed distance of O from the chord line, positive when O lies away from K.
-        const double side_k = Cross(chord, K - P), side_o = Cross(chord, -P);
-        const double d = (side_k * side_o < 0 ? 1.0 : -1.0) * std::abs(side_o) / len;
-        if (case_out) *case_out = 4;
-        return CircularSegmentArea(kTwoPi - cap(d)) + 0.5 * std::abs(Cross(P - K, Q - K));
-      }
-    }
-  }
-  return nan;
-}
-
-double EllipseWindowArea(const EllipseSegment& s, double hx, double hy, bool five_cases) {
+std::array<Vec2, 4> EllipseWindowInDisk(const EllipseSegment& s, double hx, double hy) {
   const double beta = s.alpha * std::sqrt((1 - s.eta) * (1 + s.eta));
   const double cx = 0.5 * s.sx * (s.kx * hx + 1), cy = 0.5 * s.sy * (s.ky * hy + 1);
   const double c = std::cos(s.phi), sn = std::sin(s.phi);
-  // M^-1 for M = [a b | centre], a = alpha (c, s), b = beta (-s, c): orthogonal axes, so the inverse
+  // M^-1 for M = [a b | center], a = alpha (c, s), b = beta (-s, c): orthogonal axes, so the inverse
   // is a rotation followed by 1/alpha, 1/beta scaling; orientation (CCW) is kept.
   auto to_disk = [&](double x, double y) {
     const double px = x - cx, py = y - cy;
     return Vec2((c * px + sn * py) / s.alpha, (-sn * px + c * py) / beta);
   };
-  const std::array<Vec2, 4> quad{to_disk(0, 0), to_disk(s.sx, 0), to_disk(s.sx, s.sy), to_disk(0, s.sy)};
-  const double ac = five_cases ? DiskQuadAreaFiveCases(quad) : DiskPolygonArea({quad.begin(), quad.end()});
-  return s.alpha * beta * ac;
+  return {to_disk(0, 0), to_disk(s.sx, 0), to_disk(s.sx, s.sy), to_disk(0, s.sy)};
+}
+
+double EllipseWindowArea(const EllipseSegment& s, double hx, double hy) {
+  const double beta = s.alpha * std::sqrt((1 - s.eta) * (1 + s.eta));
+  const std::array<Vec2, 4> quad = EllipseWindowInDisk(s, hx, hy);
+  return s.alpha * beta * DiskPolygonArea({quad.begin(), quad.end()});
 }
 
 // ---- Parameters and presets ---------------------------------------------------------------------
@@ -193,8 +131,9 @@ Irawan2006Params Irawan2006Preset(const std::string& name) {
   p.preset = name;
   p.segments.clear();
   if (name == "twill") {
-    // Report section 6 parameters; 3/1 twill layout of irawan-models.md 1.5: column c has its
-    // weft window on rows 2c, 2c+1 from the top and its warp window on the other six (wrapping).
+    // Report section 6 parameters; 3/1 twill layout (docs/btf-synth.md, "Irawan 2006"): column c
+    // has its weft window on rows 2c, 2c+1 from the top and its warp window on the other six
+    // (wrapping).
     p.tile_w = 4, p.tile_h = 8;
     for (int c = 0; c < 4; ++c) {
       const int weft_y0 = p.tile_h - 2 * c - 2;
@@ -396,11 +335,11 @@ void Irawan2006Model::EvalBatch(const Vec3& wi, const Vec3& wo, const Vec2* uv, 
   for (int i = 0; i < n; ++i) EvalPrepared(pr, uv[i], out + 3 * i);
 }
 
-double Irawan2006Model::HighlightFraction(const Vec3& wi, const Vec3& wo, bool five_cases) const {
+double Irawan2006Model::HighlightFraction(const Vec3& wi, const Vec3& wo) const {
   if (!(wi.allFinite() && wo.allFinite()) || wi.z() <= 0 || wo.z() <= 0) return 0;
   const Vec3 h = HalfVector(wi.normalized(), wo.normalized());
   double area = 0;
-  for (const auto& s : p_.segments) area += EllipseWindowArea(s, h.x(), h.y(), five_cases);
+  for (const auto& s : p_.segments) area += EllipseWindowArea(s, h.x(), h.y());
   return area / (p_.tile_w * p_.tile_h);
 }
 

@@ -4,13 +4,13 @@
 //   L(p, wi, wo) = kd + ks * I(p, h) * F(theta_d) * G(wi, wo) / (cos_i cos_o)
 //
 // Each thread segment is an axis-aligned window (s_x, s_y) of a tile of W x H units. Inside it
-// the highlight indicator I is 1 inside an ellipse whose centre moves with the half vector:
+// the highlight indicator I is 1 inside an ellipse whose center moves with the half vector:
 // c = (s_x (k_x h_x + 1) / 2, s_y (k_y h_y + 1) / 2) (window origin at its lower-left corner).
 // Choices the report leaves open (docs/btf-synth.md, "Irawan 2006"):
 //  - every parameter and (h_x, h_y) is in the global tile frame (no per-weft rotation);
 //  - Fresnel: exact unpolarised dielectric at cos(theta_d) = wi.h, index `ior` (or F = 1);
 //  - G: V-groove Torrance-Sparrow min(1, 2(n.h)(n.wo)/(wo.h), 2(n.h)(n.wi)/(wo.h));
-//  - kd is a BRDF value (albedo / pi), ks is a plain multiplier; no normalisation.
+//  - kd is a BRDF value (albedo / pi), ks is a plain multiplier; no normalization.
 #include <array>
 #include <string>
 #include <vector>
@@ -29,10 +29,8 @@ double CircularSegmentArea(double theta);
 // sum over edges of area(disk ∩ triangle(O, P_k, P_k+1)). Continuous across tangencies.
 double DiskPolygonArea(const std::vector<Vec2>& polygon);
 
-// The report's five cases (case 4 as segment + triangle), for a convex quadrilateral given
-// counter-clockwise. Returns NaN if the configuration is none of the five (which the
-// "ellipse fits in the window" assumption excludes). Test oracle only.
-double DiskQuadAreaFiveCases(const std::array<Vec2, 4>& quad, int* case_out = nullptr);
+// Roots t1 <= t2 of |a + t d|^2 = 1; false if the line misses or grazes the unit circle.
+bool UnitCircleRoots(const Vec2& a, const Vec2& d, double* t1, double* t2);
 
 struct EllipseSegment {
   std::string type;          // "warp" or "weft" (documentation; no frame change)
@@ -41,12 +39,16 @@ struct EllipseSegment {
   double alpha = 0.5;        // semi-major axis
   double eta = 0.9;          // eccentricity in [0, 1)
   double phi = 0;            // major-axis angle, radians, CCW from +x
-  double kx = 1, ky = 1;     // centre motion with the half vector
+  double kx = 1, ky = 1;     // center motion with the half vector
 };
 
+// The window [0,sx]x[0,sy]'s corners (counter-clockwise) in the frame where the segment's ellipse
+// for the half-vector projection (hx, hy) is the unit disk.
+std::array<Vec2, 4> EllipseWindowInDisk(const EllipseSegment& s, double hx, double hy);
+
 // Area of the window [0,sx]x[0,sy] inside the segment's ellipse for the half-vector projection
-// (hx, hy). `five_cases` selects the oracle instead of the case-free method.
-double EllipseWindowArea(const EllipseSegment& s, double hx, double hy, bool five_cases = false);
+// (hx, hy): alpha beta DiskPolygonArea(EllipseWindowInDisk(s, hx, hy)).
+double EllipseWindowArea(const EllipseSegment& s, double hx, double hy);
 
 struct Irawan2006Params {
   std::string preset = "twill";
@@ -76,7 +78,7 @@ class Irawan2006Model final : public SvbrdfModel {
   const Irawan2006Params& params() const { return p_; }
 
   // Fraction of the tile lit by highlights, S̄(h) = sum A_E / sum A_R (analytic).
-  double HighlightFraction(const Vec3& wi, const Vec3& wo, bool five_cases = false) const;
+  double HighlightFraction(const Vec3& wi, const Vec3& wo) const;
   // Direction-only factor ks-free: F G / (cos_i cos_o), 0 below the horizon.
   double SpecularFactor(const Vec3& wi, const Vec3& wo) const;
 

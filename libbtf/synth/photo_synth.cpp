@@ -91,9 +91,12 @@ void PhotoOptions::Check() const {
 
 nlohmann::json PhotoSummary::ToJson() const {
   return {{"photos", photos},
-          {"seconds", seconds},
-          {"seconds_per_photo", photos ? seconds / photos : 0.0},
-          {"times", times.ToJson()}};
+          {"seconds_per_photo", photos ? times.Total() / photos : 0.0},
+          {"seconds", times.ToJson()}};
+}
+
+std::string PhotoSummary::Report() const {
+  return fmt::format("{} photos ({:.2f} s each)\n", photos, photos ? times.Total() / photos : 0.0);
 }
 
 Board MakeBoard(const PhotoOptions& o, double tile_mm) {
@@ -103,7 +106,7 @@ Board MakeBoard(const PhotoOptions& o, double tile_mm) {
   const TagBitmap probe = RenderTag(o.family, 0);
   const double m = o.module_mm > 0 ? o.module_mm : b.sample_size_mm / 20;
   const double det = probe.width_at_border * m, card = probe.total_width * m;
-  // Card centres one module outside the sample edge, in a ring of 8 (corners and mid-sides).
+  // Card centers one module outside the sample edge, in a ring of 8 (corners and mid-sides).
   const double d = b.sample_size_mm / 2 + m + card / 2;
   const int ring[8][2] = {{-1, -1}, {0, -1}, {1, -1}, {1, 0}, {1, 1}, {0, 1}, {-1, 1}, {-1, 0}};
   for (int k = 0; k < 8; ++k) {
@@ -120,25 +123,10 @@ Board MakeBoard(const PhotoOptions& o, double tile_mm) {
 }
 
 bool CameraPose::Project(const Vec3& X, Vec2* pixel) const {
-  const Vec3 p = rotation * X + translation;
-  if (p.z() <= 1e-9) return false;
-  const double x = p.x() / p.z(), y = p.y() / p.z();
-  const double r2 = x * x + y * y;
-  const double s = 1 + camera.k1 * r2 + camera.k2 * r2 * r2;
-  *pixel = Vec2(camera.fx * x * s + camera.cx, camera.fy * y * s + camera.cy);
-  return true;
+  return ProjectToPixel(camera, rotation, translation, X, pixel);
 }
 
-Eigen::Matrix3d CameraPose::PlateHomography() const {
-  Eigen::Matrix3d K;
-  K << camera.fx, 0, camera.cx, 0, camera.fy, camera.cy, 0, 0, 1;
-  Eigen::Matrix3d Rt;
-  Rt.col(0) = rotation.col(0);
-  Rt.col(1) = rotation.col(1);
-  Rt.col(2) = translation;
-  Eigen::Matrix3d H = K * Rt;
-  return H / H(2, 2);
-}
+Eigen::Matrix3d CameraPose::PlateHomography() const { return PlaneHomography(camera, rotation, translation); }
 
 CameraPose MakeCamera(const PhotoOptions& o, const Board& board, const Vec3& view_dir) {
   const Vec3 v = view_dir.normalized();
@@ -155,8 +143,8 @@ CameraPose MakeCamera(const PhotoOptions& o, const Board& board, const Vec3& vie
   c.camera.cy = 0.5 * (o.height - 1);
   c.camera.k1 = o.k1;
   c.camera.k2 = o.k2;
-  c.centre = o.camera_distance_mm * v;
-  // OpenCV camera: z forward (to the plate centre), y down, x = y cross z. Image up follows plate +y.
+  c.center = o.camera_distance_mm * v;
+  // OpenCV camera: z forward (to the plate center), y down, x = y cross z. Image up follows plate +y.
   const Vec3 zc = -v;
   const Vec3 up = Vec3::UnitY() - Vec3::UnitY().dot(zc) * zc;
   const Vec3 yc = -up.normalized();
@@ -164,7 +152,7 @@ CameraPose MakeCamera(const PhotoOptions& o, const Board& board, const Vec3& vie
   c.rotation.row(0) = xc.transpose();
   c.rotation.row(1) = yc.transpose();
   c.rotation.row(2) = zc.transpose();
-  c.translation = -c.rotation * c.centre;
+  c.translation = -c.rotation * c.center;
   return c;
 }
 
@@ -209,7 +197,7 @@ Image RenderPhoto(const SvbrdfModel& model, const Board& board, const PhotoOptio
       for (int px = 0; px < W; ++px) {
         for (int j = 0; j < n; ++j)
           for (int i = 0; i < n; ++i) {
-            // Sub-pixel position (OpenCV: pixel centre at integer coordinates), undistorted.
+            // Sub-pixel position (OpenCV: pixel center at integer coordinates), undistorted.
             const double xd = (px + (i + 0.5) / n - 0.5 - K.cx) / K.fx, yd = (py + (j + 0.5) / n - 0.5 - K.cy) / K.fy;
             double xu = xd, yu = yd;
             if (K.k1 != 0 || K.k2 != 0)
@@ -225,8 +213,8 @@ Image RenderPhoto(const SvbrdfModel& model, const Board& board, const PhotoOptio
             // Marker cards first (they lie at or above the material surface).
             bool hit = false;
             for (const MarkerGeom& g : markers) {
-              const double t = (g.height - cam.centre.z()) / dir.z();
-              const Vec3 X = cam.centre + t * dir;
+              const double t = (g.height - cam.center.z()) / dir.z();
+              const Vec3 X = cam.center + t * dir;
               const double alb = MarkerAlbedo(g, X.head<2>());
               if (alb < 0) continue;
               const double L = alb / kPi * irradiance(X);
@@ -235,14 +223,14 @@ Image RenderPhoto(const SvbrdfModel& model, const Board& board, const PhotoOptio
               break;
             }
             if (hit) continue;
-            const double t0 = -cam.centre.z() / dir.z();
-            const Vec3 X = cam.centre + t0 * dir;
+            const double t0 = -cam.center.z() / dir.z();
+            const Vec3 X = cam.center + t0 * dir;
             const double E = irradiance(X);
             if (std::abs(X.x()) <= half_sample && std::abs(X.y()) <= half_sample) {
               const Vec2 uv = warp.Apply(Vec2((X.x() + half_sample) / tile, (X.y() + half_sample) / tile));
               if (o.true_directions) {
                 float f[3];
-                model.Eval(uv, light_from(X), (cam.centre - X).normalized(), f);
+                model.Eval(uv, light_from(X), (cam.center - X).normalized(), f);
                 a[0] += f[0] * E, a[1] += f[1] * E, a[2] += f[2] * E;
               } else {
                 uvs.push_back(uv);
@@ -287,10 +275,9 @@ std::vector<std::pair<int, int>> SelectPhotos(const PhotoOptions& o) {
   return out;
 }
 
-PhotoSummary SynthesizePhotos(const SvbrdfModel& model, const PhotoOptions& o, const std::filesystem::path& dir,
+PhotoSummary SynthesizePhotos(const PhotoOptions& o, const SvbrdfModel& model, const std::filesystem::path& dir,
                               const Reporter& reporter, const nlohmann::json& extra) {
   o.Check();
-  Timer total;
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
   if (!std::filesystem::is_directory(dir))
@@ -381,7 +368,6 @@ PhotoSummary SynthesizePhotos(const SvbrdfModel& model, const PhotoOptions& o, c
   WriteTruth(dir / "truth.json", truth);
   WriteManifest(dir / "manifest.json", manifest);  // last: its presence means the set is complete
   summary.photos = static_cast<int>(pairs.size());
-  summary.seconds = total.Seconds();
   summary.times = times;
   return summary;
 }

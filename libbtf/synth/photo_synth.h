@@ -40,7 +40,7 @@ struct PhotoOptions {
   int pixel_samples = 3;          // per axis, box filter over the pixel
   // Light.
   double light_distance_mm = 0;   // 0 = directional
-  double light_intensity = 0;     // 0 = 1 (directional) or distance^2 (point: irradiance 1 at the centre)
+  double light_intensity = 0;     // 0 = 1 (directional) or distance^2 (point: irradiance 1 at the center)
   bool true_directions = false;   // evaluate the BTF with per-point directions (default: nominal)
   // Sensor.
   std::string format = "png16";   // "png16", "png8" or "exr"
@@ -52,21 +52,21 @@ struct PhotoOptions {
 
 struct PhotoSummary {
   int photos = 0;
-  double seconds = 0;
   std::vector<std::string> files;
   PhaseTimes times;
   nlohmann::json ToJson() const;
+  std::string Report() const;  // one line: photos, time per photo
 };
 
 // The plate layout for a model's tile size (8 markers in a ring, ids 0..7, upright).
 Board MakeBoard(const PhotoOptions& options, double tile_mm);
 
-// A camera at `view_dir` x distance looking at the plate centre (image up ~ plate +y).
+// A camera at `view_dir` x distance looking at the plate center (image up ~ plate +y).
 struct CameraPose {
   CameraModel camera;
   Eigen::Matrix3d rotation;  // camera_from_plate
   Vec3 translation;          // camera_from_plate, mm
-  Vec3 centre;               // camera centre in plate mm
+  Vec3 center;               // camera center in plate mm
   // Plate point (mm) -> pixel (OpenCV convention), distortion applied. False if behind the camera.
   bool Project(const Vec3& plate_point, Vec2* pixel) const;
   // The z = 0 homography plate mm -> undistorted pixels.
@@ -82,7 +82,7 @@ Image RenderPhoto(const SvbrdfModel& model, const Board& board, const PhotoOptio
 std::vector<std::pair<int, int>> SelectPhotos(const PhotoOptions& options);
 
 // Renders and writes the whole set into `dir` (created if missing). Each file atomically.
-PhotoSummary SynthesizePhotos(const SvbrdfModel& model, const PhotoOptions& options, const std::filesystem::path& dir,
+PhotoSummary SynthesizePhotos(const PhotoOptions& options, const SvbrdfModel& model, const std::filesystem::path& dir,
                               const Reporter& reporter = {}, const nlohmann::json& extra = {});
 
 }  // namespace btf

@@ -148,11 +148,6 @@ void Sadeghi2013Model::Terms(const SadeghiThread& th, const TangentFrame& f, con
   *volume = f_volume / cos2_td;
 }
 
-void Sadeghi2013Model::ThreadTerms(const SadeghiThread& th, double tilt, const Vec3& wi, const Vec3& wo,
-                                   double* surface, double* volume, double* masking) const {
-  Terms(th, MakeFrame(th.along_v, tilt, 1.0), wi, wo, surface, volume, masking);
-}
-
 void Sadeghi2013Model::EvalRgb(const Vec3& wi_in, const Vec3& wo_in, double out[3]) const {
   out[0] = out[1] = out[2] = 0;
   const double ni = wi_in.norm(), no = wo_in.norm();
@@ -261,13 +256,13 @@ nlohmann::json Sadeghi2013Model::Describe() const {
 
 namespace {
 
-SadeghiThread MakeThread(std::string label, bool along_v, std::array<double, 3> colour, double scale, double kd,
+SadeghiThread MakeThread(std::string label, bool along_v, std::array<double, 3> color, double scale, double kd,
                          double gs_deg, double gv_deg, double a, std::vector<double> offsets_deg,
                          std::vector<double> lengths) {
   SadeghiThread t;
   t.label = std::move(label);
   t.along_v = along_v;
-  for (int c = 0; c < 3; ++c) t.albedo[static_cast<std::size_t>(c)] = colour[static_cast<std::size_t>(c)] * scale;
+  for (int c = 0; c < 3; ++c) t.albedo[static_cast<std::size_t>(c)] = color[static_cast<std::size_t>(c)] * scale;
   t.kd = kd;
   t.gamma_s = DegToRad(gs_deg);
   t.gamma_v = DegToRad(gv_deg);

@@ -60,10 +60,6 @@ class Sadeghi2013Model : public SvbrdfModel {
 
   // Double-precision BRDF (1/sr, without cos theta_i); 0 below the horizon.
   void EvalRgb(const Vec3& wi, const Vec3& wo, double out[3]) const;
-  // Thread scattering f_s of Eq. 4 and masking M of Eq. 9 for the tangent of `th` tilted by `tilt`
-  // (radians) out of the fabric plane; f_s = surface + volume * A.
-  void ThreadTerms(const SadeghiThread& th, double tilt, const Vec3& wi, const Vec3& wo, double* surface,
-                   double* volume, double* masking) const;
   const SadeghiParams& params() const { return params_; }
 
  private:

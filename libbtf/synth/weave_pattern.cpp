@@ -182,7 +182,7 @@ class Parser {
     return static_cast<int>(v);
   }
 
-  Rgb Colour(const char* what) {
+  Rgb Color(const char* what) {
     if (cur_.kind == Token::kVariable) {
       const Token t = cur_;
       Advance();
@@ -292,9 +292,9 @@ class Parser {
     } else if (k == "centerV") {
       y.center_v = Float("centerV");
     } else if (k == "kd") {
-      y.kd = Colour("kd");
+      y.kd = Color("kd");
     } else if (k == "ks") {
-      y.ks = Colour("ks");
+      y.ks = Color("ks");
     } else if (k == "alpha") {
       y.alpha = Float("alpha");
     } else if (k == "beta") {
@@ -319,7 +319,7 @@ std::string Col(const Rgb& c) { return fmt::format("{{{}, {}, {}}}", Num(c[0]), 
 
 // ---------------------------------------------------------------------------------------------
 // Presets. The six Mitsuba/Lux fabrics are kept as .wv text (values from the Lux/LuxCore preset
-// tables, reference/irawan-models.md section 3); their colours are our choice (no published RGB).
+// tables, as docs/btf-synth.md lists them); their colors are our choice (no published RGB).
 struct PresetText {
   const char* name;
   const char* text;
@@ -419,7 +419,7 @@ const PresetText kTextPresets[] = {
 };
 
 // Builds the layouts we chose for Sadeghi's supplement fabrics: each run of cells of one yarn
-// becomes a segment; a run that wraps over the tile edge becomes two yarn entries (one centred
+// becomes a segment; a run that wraps over the tile edge becomes two yarn entries (one centered
 // outside the tile), exactly as the Mitsuba presets do.
 class LayoutBuilder {
  public:
@@ -696,7 +696,7 @@ void ValidateWeavePattern(const WeavePattern& p, const std::string& source) {
       xl = -yl;
       yl = t;
     }
-    constexpr double kTol = 0.02;  // cells; preset centres are rounded to 3-4 decimals
+    constexpr double kTol = 0.02;  // cells; preset centers are rounded to 3-4 decimals
     if (std::abs(xl) + 0.5 > 0.5 * y.width + kTol || std::abs(yl) + 0.5 > 0.5 * y.length + kTol)
       fail(fmt::format("pattern cell (column {}, row {} from the top) lies outside the segment of yarn {} "
                        "(centre ({}, {}), width {}, length {}): check centerU/centerV/width/length",

@@ -4,7 +4,7 @@
 // Sadeghi 2013 models").
 //
 // Units as stored here: angles in RADIANS (the .wv text uses degrees), lengths in pattern cells,
-// segment centres in tile units ((0,0) = lower-left corner of the tile, may lie outside [0,1]).
+// segment centers in tile units ((0,0) = lower-left corner of the tile, may lie outside [0,1]).
 #include <array>
 #include <cmath>
 #include <filesystem>
@@ -26,9 +26,9 @@ struct WeaveYarn {
   double kappa = 0;  // spine curvature, > -1
   double width = 0;  // segment width w (cells)
   double length = 0; // segment length l (cells)
-  double center_u = 0, center_v = 0;  // segment centre (tile units)
+  double center_u = 0, center_v = 0;  // segment center (tile units)
   Rgb kd{0, 0, 0};  // diffuse albedo (the BRDF adds kd / pi), linear RGB
-  Rgb ks{0, 0, 0};  // specular albedo after normalisation, linear RGB
+  Rgb ks{0, 0, 0};  // specular albedo after normalization, linear RGB
   // libbtf extension (Sadeghi's supplement gives these per thread): NaN = use the weave's value.
   double alpha = std::numeric_limits<double>::quiet_NaN();
   double beta = std::numeric_limits<double>::quiet_NaN();
@@ -65,7 +65,7 @@ struct WeavePattern {
 // `dWarpUmaxOverDWarp|dWarpUmaxOverDWeft|dWeftUmaxOverDWarp|dWeftUmaxOverDWeft = F` (degrees),
 // `pattern { N, N, ... }` and `yarn { type = warp|weft, psi|umax = F (degrees), kappa|width|
 // length|centerU|centerV = F, kd|ks = {r, g, b} }`, separated by commas; `/* ... */` comments.
-// A float or colour may be a `$identifier`, resolved from `variables` (JSON number or [r,g,b]).
+// A float or color may be a `$identifier`, resolved from `variables` (JSON number or [r,g,b]).
 // libbtf extension: yarn items `alpha`, `beta`, `ss` (per-thread values, as in Sadeghi 2013).
 // `source` names the file in error messages (bad input, with line number). Validates the result.
 WeavePattern ParseWeavePattern(const std::string& text, const std::string& source,

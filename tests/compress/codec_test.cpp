@@ -12,6 +12,7 @@
 #include "libbtf/core/error.h"
 #include "libbtf/io/dataset_io.h"
 #include "tests/compress/synthetic.h"
+#include "tests/codec_util.h"
 #include "tests/test_util.h"
 
 namespace btf {
@@ -33,7 +34,7 @@ CompressOptions Lpca(int k, int c) {
 
 // --- PCA kernel -----------------------------------------------------------------------------
 
-TEST(Pca, GramCovarianceRandomisedAndFullSvdAgreeOnLowRankData) {
+TEST(Pca, GramCovarianceRandomizedAndFullSvdAgreeOnLowRankData) {
   // 60 x 300 matrix of exact rank 5 around a mean: every path must capture all the energy.
   std::mt19937_64 rng(1);
   std::uniform_real_distribution<float> uni(-1, 1);
@@ -47,11 +48,11 @@ TEST(Pca, GramCovarianceRandomisedAndFullSvdAgreeOnLowRankData) {
   const PcaResult gram = Pca(X, q);  // n = 60 <= d: Gram of the rows
   const RowMatrixXf Xt = X.transpose();
   const PcaResult cov = Pca(Xt.topRows(300), q);  // n = 300 > d = 60: covariance
-  q.gram_limit = 10;                               // force the randomised path (min side 60 > 10)
+  q.gram_limit = 10;                               // force the randomized path (min side 60 > 10)
   const PcaResult rnd = Pca(X, q);
   const PcaResult svd = PcaFullSvd(X, 5);
-  EXPECT_FALSE(gram.randomised);
-  EXPECT_TRUE(rnd.randomised);
+  EXPECT_FALSE(gram.randomized);
+  EXPECT_TRUE(rnd.randomized);
   // Rank 5: components 6..8 have ~0 eigenvalue and are dropped.
   EXPECT_EQ(gram.components(), 5);
   EXPECT_EQ(rnd.components(), 5);
@@ -102,7 +103,7 @@ TEST(PcaView, ExactRankRecoversTheDataAndMoreComponentsNeverHurt) {
   double previous = 1e9;
   for (int c : {1, 2, 3, 4, 6}) {
     CompressSummary s;
-    const Codec codec = Compress(d, PcaView(c), {}, &s);
+    const Codec codec = test::CompressDataset(d, PcaView(c), &s);
     const double e = test::RelativeError(d, codec.DecodeAll());
     // The summary's error is the decoded error (same definition, double accumulation).
     EXPECT_NEAR(s.relative_error, e, 1e-6 * std::max(e, 1e-3));
@@ -115,7 +116,7 @@ TEST(PcaView, ExactRankRecoversTheDataAndMoreComponentsNeverHurt) {
     }
   }
   CompressSummary s;
-  Compress(d, PcaView(1), {}, &s);
+  test::CompressDataset(d, PcaView(1), &s);
   EXPECT_GT(s.relative_error, 1e-3);  // one component cannot hold a rank-4 slot
   EXPECT_GT(s.ratio_float32, 1.0);
   EXPECT_NEAR(s.ratio_float32, 2 * s.ratio_half, 1e-9);
@@ -125,7 +126,7 @@ TEST(PcaView, ExactRankRecoversTheDataAndMoreComponentsNeverHurt) {
 
 TEST(PcaView, DecodersAgree) {
   const Dataset d = test::PerViewLowRank(test::BonnSubset(5), test::BonnSubset(20, 3), 6, 7, 3, 1e-3);
-  const Codec codec = Compress(d, PcaView(3));
+  const Codec codec = test::CompressDataset(d, PcaView(3));
   const Dataset all = codec.DecodeAll();
   std::vector<float> img(codec.image_size());
   codec.DecodeImage(2, 5, img.data());
@@ -134,7 +135,7 @@ TEST(PcaView, DecodersAgree) {
   const auto abrdf = codec.DecodeAbrdf(3, 4);
   const auto want = all.Abrdf(3, 4);
   for (std::size_t i = 0; i < abrdf.size(); ++i) EXPECT_NEAR(abrdf[i], want[i], 1e-5);
-  // Value() at a sampled (wi, wo) pair and a texel centre reproduces the sample exactly (both filters).
+  // Value() at a sampled (wi, wo) pair and a texel center reproduces the sample exactly (both filters).
   float out[3];
   const Vec2 uv((4 + 0.5) / 7, 1 - (3 + 0.5) / 6);
   for (UvFilter f : {UvFilter::kNearest, UvFilter::kBilinear}) {
@@ -145,7 +146,7 @@ TEST(PcaView, DecodersAgree) {
 
 TEST(PcaView, ValueInterpolatesBarycentricallyAndBilinearly) {
   const Dataset d = test::PerViewLowRank(test::BonnSubset(19), test::BonnSubset(19), 4, 4, 2, 0);
-  const Codec codec = Compress(d, PcaView(2));
+  const Codec codec = test::CompressDataset(d, PcaView(2));
   const Dataset all = codec.DecodeAll();
   const Vec3 wo = DirectionFromAngles(DegToRad(20), DegToRad(40)), wi = DirectionFromAngles(DegToRad(10), DegToRad(-70));
   const Interpolant iv = codec.views().Barycentric(wo), il = codec.lights().Barycentric(wi);
@@ -169,7 +170,7 @@ TEST(PcaView, ValueInterpolatesBarycentricallyAndBilinearly) {
 TEST(PcaView, ComponentsAreClampedToLightsMinusOneWithAWarning) {
   const Dataset d = test::PerViewLowRank(test::BonnSubset(2), test::BonnSubset(5), 4, 4, 2, 1e-3);
   CompressSummary s;
-  const Codec codec = Compress(d, PcaView(16), {}, &s);
+  const Codec codec = test::CompressDataset(d, PcaView(16), &s);
   ASSERT_FALSE(s.warnings.empty());
   EXPECT_NE(s.warnings[0].find("clamped to 4"), std::string::npos);
   for (const auto& slot : codec.pca_view()) EXPECT_LE(slot.components, 4);
@@ -181,7 +182,7 @@ TEST(PcaView, ConstantAndRankDeficientData) {
   Dataset d(test::BonnSubset(3), test::BonnSubset(6), 4, 4, 3);
   std::fill(d.data().begin(), d.data().end(), 0.7f);
   CompressSummary s;
-  const Codec codec = Compress(d, PcaView(4), {}, &s);
+  const Codec codec = test::CompressDataset(d, PcaView(4), &s);
   for (const auto& slot : codec.pca_view()) EXPECT_EQ(slot.components, 0);
   EXPECT_EQ(s.relative_error, 0.0);
   EXPECT_TRUE(std::isinf(s.psnr_db));
@@ -193,14 +194,14 @@ TEST(PcaView, NonFiniteInputIsRefusedNamingTheItem) {
   Dataset d = test::PerViewLowRank(test::BonnSubset(2), test::BonnSubset(5), 4, 4, 2, 1e-3);
   d.at(1, 3, 2, 1, 0) = std::numeric_limits<float>::quiet_NaN();
   try {
-    Compress(d, PcaView(2));
+    test::CompressDataset(d, PcaView(2));
     FAIL() << "NaN accepted";
   } catch (const Error& e) {
     EXPECT_EQ(e.code(), ExitCode::kBadInput);
-    EXPECT_NE(std::string(e.what()).find("view 1, light 3, texel (x 1, y 2)"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("view 1, light 3, texel (y 2, x 1)"), std::string::npos) << e.what();
   }
   d.at(1, 3, 2, 1, 0) = std::numeric_limits<float>::infinity();
-  EXPECT_THROW(Compress(d, Lpca(2, 2)), Error);
+  EXPECT_THROW(test::CompressDataset(d, Lpca(2, 2)), Error);
 }
 
 TEST(PcaView, LogTransformIsRecordedAndInverted) {
@@ -216,7 +217,7 @@ TEST(PcaView, LogTransformIsRecordedAndInverted) {
   o.log_transform = true;
   o.log_epsilon = 1e-6;
   CompressSummary s;
-  const Codec codec = Compress(d, o, {}, &s);
+  const Codec codec = test::CompressDataset(d, o, &s);
   EXPECT_EQ(codec.transform(), ValueTransform::kLog);
   // log(x + eps) is rank 1 up to eps / x <= 1e-3 relative: each value within 0.2 %.
   const Dataset back = codec.DecodeAll();
@@ -229,7 +230,7 @@ TEST(PcaView, LogTransformIsRecordedAndInverted) {
   EXPECT_EQ(r.DecodeAll().data(), back.data());
   // Values at or below -epsilon cannot be log-transformed.
   d.at(0, 0, 0, 0, 0) = -1;
-  EXPECT_THROW(Compress(d, o), Error);
+  EXPECT_THROW(test::CompressDataset(d, o), Error);
 }
 
 // --- local PCA ------------------------------------------------------------------------------
@@ -237,8 +238,8 @@ TEST(PcaView, LogTransformIsRecordedAndInverted) {
 TEST(Lpca, RecoversClusteredLowRankDataDeterministically) {
   const Dataset d = test::ClusteredLowRank(test::BonnSubset(6), test::BonnSubset(6, 5), 12, 12, 3, 2);
   CompressSummary s1, s2;
-  const Codec a = Compress(d, Lpca(3, 2), {}, &s1);
-  const Codec b = Compress(d, Lpca(3, 2), {}, &s2);
+  const Codec a = test::CompressDataset(d, Lpca(3, 2), &s1);
+  const Codec b = test::CompressDataset(d, Lpca(3, 2), &s2);
   EXPECT_EQ(a.lpca().cluster_of, b.lpca().cluster_of);
   EXPECT_EQ(a.lpca().weights, b.lpca().weights);
   // Exact model: float rounding only.
@@ -255,7 +256,7 @@ TEST(Lpca, RecoversClusteredLowRankDataDeterministically) {
 
 TEST(Lpca, DecodersAgreeAndValueMatchesSamples) {
   const Dataset d = test::ClusteredLowRank(test::BonnSubset(5), test::BonnSubset(7, 3), 6, 5, 2, 2);
-  const Codec codec = Compress(d, Lpca(3, 1));
+  const Codec codec = test::CompressDataset(d, Lpca(3, 1));
   const Dataset all = codec.DecodeAll();
   std::vector<float> img(codec.image_size());
   codec.DecodeImage(4, 6, img.data());
@@ -272,7 +273,7 @@ TEST(Lpca, DecodersAgreeAndValueMatchesSamples) {
 TEST(Lpca, MoreClustersThanTexelsAreClampedAndEmptyClustersReseeded) {
   const Dataset d = test::ClusteredLowRank(test::BonnSubset(3), test::BonnSubset(4), 2, 3, 2, 1);
   CompressSummary s;
-  const Codec codec = Compress(d, Lpca(10, 2), {}, &s);
+  const Codec codec = test::CompressDataset(d, Lpca(10, 2), &s);
   EXPECT_EQ(codec.lpca().clusters, 6);
   bool warned = false;
   for (const auto& w : s.warnings) warned |= w.find("clamped to the number of texels 6") != std::string::npos;
@@ -284,7 +285,7 @@ TEST(Lpca, MoreClustersThanTexelsAreClampedAndEmptyClustersReseeded) {
 }
 
 TEST(Lpca, DuplicateTexelsLeaveNoClusterEmpty) {
-  // 16 texels with only 2 distinct ABRDFs and k = 4: seeding picks duplicate centres, and the
+  // 16 texels with only 2 distinct ABRDFs and k = 4: seeding picks duplicate centers, and the
   // empty clusters are re-seeded from other texels.
   Dataset d(test::BonnSubset(2), test::BonnSubset(3), 4, 4, 3);
   for (int y = 0; y < 4; ++y)
@@ -293,7 +294,7 @@ TEST(Lpca, DuplicateTexelsLeaveNoClusterEmpty) {
         for (int l = 0; l < 3; ++l)
           for (int c = 0; c < 3; ++c) d.at(v, l, y, x, c) = (x < 2 ? 1.0f : 2.0f) + 0.1f * (v + l + c);
   CompressSummary s;
-  const Codec codec = Compress(d, Lpca(4, 1), {}, &s);
+  const Codec codec = test::CompressDataset(d, Lpca(4, 1), &s);
   std::set<int> used(codec.lpca().cluster_of.begin(), codec.lpca().cluster_of.end());
   EXPECT_EQ(used.size(), 4u);
   EXPECT_LT(s.relative_error, 1e-6);
@@ -305,7 +306,7 @@ TEST(CodecFile, RoundTripIsExactForBothMethods) {
   const Dataset d = test::ClusteredLowRank(test::BonnSubset(4), test::BonnSubset(5, 2), 5, 6, 2, 2);
   for (const CompressOptions& o : {PcaView(3), Lpca(2, 2)}) {
     const auto path = test::TempDir() / "c.h5";
-    const Codec codec = Compress(d, o);
+    const Codec codec = test::CompressDataset(d, o);
     WriteCodec(path, codec);
     const Codec r = ReadCodec(path);
     EXPECT_EQ(r.method(), o.method);
@@ -338,7 +339,7 @@ void SetStringAttr(const std::filesystem::path& path, const char* name, const st
 TEST(CodecFile, RefusesNewerMajorMissingItemsAndDatasets) {
   const Dataset d = test::ClusteredLowRank(test::BonnSubset(3), test::BonnSubset(4), 4, 4, 2, 1);
   const auto dir = test::TempDir();
-  const Codec codec = Compress(d, Lpca(2, 1));
+  const Codec codec = test::CompressDataset(d, Lpca(2, 1));
   WriteCodec(dir / "new.h5", codec);
   SetStringAttr(dir / "new.h5", "format_version", "2.0.0");
   try {
@@ -375,7 +376,7 @@ TEST(CodecFile, CompressFileStreamsTheSameResultAsInMemory) {
   const auto path = test::TempDir() / "d.h5";
   WriteDataset(path, d);
   CompressSummary s;
-  const Codec a = CompressFile(path, PcaView(2), {}, &s), b = Compress(d, PcaView(2));
+  const Codec a = test::CompressPath(path, PcaView(2), &s), b = test::CompressDataset(d, PcaView(2));
   EXPECT_EQ(a.DecodeAll().data(), b.DecodeAll().data());
   EXPECT_EQ(s.input, path.string());
 }
@@ -391,9 +392,9 @@ TEST(Scene, KeepsOnlyNeededDirectionsMipAndChannels) {
   CompressOptions o = PcaView(3);
   o.scene = scene;
   CompressSummary s;
-  const Codec codec = Compress(d, o, {}, &s);
+  const Codec codec = test::CompressDataset(d, o, &s);
   EXPECT_TRUE(s.scene_used);
-  // A 5-degree cone around a sampled direction touches it and its neighbours only.
+  // A 5-degree cone around a sampled direction touches it and its neighbors only.
   EXPECT_LT(codec.num_views(), 12);
   EXPECT_GE(codec.num_views(), 3);
   EXPECT_EQ(codec.num_lights(), 19);
@@ -418,7 +419,7 @@ TEST(Scene, BadSceneFilesAreRefused) {
   CompressOptions o = PcaView(1);
   o.scene = SceneSpec::FromJson(nlohmann::json::parse(R"({"channels": ["X"]})"), "s");
   try {
-    Compress(d, o);
+    test::CompressDataset(d, o);
     FAIL();
   } catch (const Error& e) {
     EXPECT_EQ(e.code(), ExitCode::kBadInput);

@@ -10,6 +10,8 @@
 #include "libbtf/io/dataset_io.h"
 #include "libbtf/synth/btf_generator.h"
 #include "libbtf/synth/model.h"
+#include "tests/codec_util.h"
+#include "tests/synth_util.h"
 #include "tests/test_util.h"
 
 namespace btf {
@@ -21,7 +23,7 @@ const Dataset& Twill() {
     BtfOptions o;
     o.resolution = 64;
     o.samples = 2;  // 2 x 2 supersampling keeps generation near a minute
-    return GenerateBtf(*model, o);
+    return test::GenerateDataset(*model, o);
   }();
   return d;
 }
@@ -43,7 +45,7 @@ TEST(TwillDoneWhen, PerViewPca16RoundTripsAndMoreComponentsNeverHurt) {
     CompressOptions o;
     o.components = c;
     CompressSummary s;
-    const Codec codec = Compress(d, o, {}, &s);
+    const Codec codec = test::CompressDataset(d, o, &s);
     EXPECT_LE(s.relative_error, previous * (1 + 1e-9)) << "c = " << c;
     previous = s.relative_error;
     if (c != 16) continue;
@@ -68,7 +70,7 @@ TEST(TwillDoneWhen, Lpca32x8RoundTripsAndMoreComponentsNeverHurt) {
     o.components = c;
     o.max_iterations = 6;
     CompressSummary s;
-    const Codec codec = Compress(d, o, {}, &s);
+    const Codec codec = test::CompressDataset(d, o, &s);
     EXPECT_LE(s.relative_error, previous * (1 + 1e-6)) << "c = " << c;
     previous = s.relative_error;
     // Each recorded round is no worse than the first (the kept fit is the best one).
@@ -79,12 +81,12 @@ TEST(TwillDoneWhen, Lpca32x8RoundTripsAndMoreComponentsNeverHurt) {
     const double e = RelErr(d, back.DecodeAll());
     EXPECT_NEAR(e, s.relative_error, 1e-6);
     EXPECT_LT(e, 0.15);  // bound with margin over the measured value (docs/btf-compress.md)
-    // Export and reference decoder agree at grid nodes to the quantisation bound.
+    // Export and reference decoder agree at grid nodes to the quantization bound.
     const auto dir = test::TempDir() / "export";
     SchneiderExportOptions eo;
     eo.view_grid = 8;
     eo.light_grid = 8;
-    ExportSchneider(back, dir, eo);
+    ExportSchneider(eo, back, dir);
     const SchneiderReferenceDecoder ref(dir);
     for (int y = 0; y < 64; y += 9)
       for (int x = 0; x < 64; x += 7) {

@@ -1,5 +1,7 @@
 #include "libbtf/eval/metrics.h"
 
+#include "libbtf/compress/codec_source.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -28,13 +30,13 @@ TEST(EvalMetrics, ConstantOffsetGivesKnownFigures) {
     ssr += double(ref.data()[i]) * ref.data()[i];
   }
   CompareOptions o;
-  const auto s = Compare(*MemorySource(ref), *MemorySource(t), o);
+  const auto s = Compare(o, *MemorySource(ref), *MemorySource(t));
   // Values are float32 near 1-2: the stored difference deviates from 0.01 by about 1e-7.
   const double tol = 1e-6;
   EXPECT_NEAR(s.rmse, delta, tol);
   EXPECT_NEAR(s.max_abs, delta, tol);
   EXPECT_DOUBLE_EQ(s.peak, MaxValue(ref));
-  EXPECT_EQ(s.peak_source, "reference max");
+  EXPECT_EQ(s.peak_source, "max |reference value|");
   ASSERT_TRUE(s.psnr_db.has_value());
   EXPECT_NEAR(*s.psnr_db, 20 * std::log10(s.peak / delta), 1e-3);  // 1e-6 relative rmse -> ~1e-5 dB
   ASSERT_TRUE(s.rel_l2.has_value());
@@ -53,7 +55,7 @@ TEST(EvalMetrics, PerViewAndPerLightTablesLocateTheError) {
       for (int x = 0; x < 5; ++x)
         for (int c = 0; c < 3; ++c) t.at(1, l, y, x, c) += 0.1f;
   t.at(1, 2, 4, 3, 1) += 0.3f;
-  const auto s = Compare(*MemorySource(ref), *MemorySource(t));
+  const auto s = Compare(CompareOptions(), *MemorySource(ref), *MemorySource(t));
   EXPECT_NEAR(s.view_rmse[0], 0.0, 1e-12);
   EXPECT_NEAR(s.view_rmse[2], 0.0, 1e-12);
   const double n_img = 6 * 5 * 3;
@@ -74,7 +76,7 @@ TEST(EvalMetrics, PerViewAndPerLightTablesLocateTheError) {
 
 TEST(EvalMetrics, IdenticalInputs) {
   const Dataset ref = test::MakeTestDataset(2, 2, 8, 8);
-  const auto s = Compare(*MemorySource(ref), *MemorySource(ref));
+  const auto s = Compare(CompareOptions(), *MemorySource(ref), *MemorySource(ref));
   EXPECT_EQ(s.rmse, 0.0);
   EXPECT_EQ(s.max_abs, 0.0);
   EXPECT_FALSE(s.psnr_db.has_value());  // infinite
@@ -101,10 +103,10 @@ TEST(EvalMetrics, AllZeroReference) {
   std::fill(ref.data().begin(), ref.data().end(), 0.0f);
   Dataset t = ref;
   t.data()[5] = 0.5f;
-  const auto s = Compare(*MemorySource(ref), *MemorySource(t));
+  const auto s = Compare(CompareOptions(), *MemorySource(ref), *MemorySource(t));
   EXPECT_FALSE(s.rel_l2.has_value());
   EXPECT_EQ(s.peak, 1.0);
-  EXPECT_EQ(s.peak_source, "1 (reference max <= 0)");
+  EXPECT_EQ(s.peak_source, "1 (reference all zero)");
   EXPECT_NEAR(s.rmse, 0.5 / std::sqrt(double(ref.size())), 1e-9);
   try {
     s.Metric("rel");
@@ -114,7 +116,7 @@ TEST(EvalMetrics, AllZeroReference) {
     EXPECT_NE(std::string(e.what()).find("--metric rmse"), std::string::npos);
   }
   // Both all zero: identical, relative error 0.
-  EXPECT_EQ(*Compare(*MemorySource(ref), *MemorySource(ref)).rel_l2, 0.0);
+  EXPECT_EQ(*Compare(CompareOptions(), *MemorySource(ref), *MemorySource(ref)).rel_l2, 0.0);
 }
 
 TEST(EvalMetrics, RefusesNanAndInfNamingTheItem) {
@@ -123,13 +125,13 @@ TEST(EvalMetrics, RefusesNanAndInfNamingTheItem) {
     Dataset t = ref;
     t.at(1, 2, 3, 4, 0) = bad;
     try {
-      Compare(*MemorySource(ref), *MemorySource(t, "test.h5"));
+      Compare(CompareOptions(), *MemorySource(ref), *MemorySource(t, "test.h5"));
       FAIL() << "non-finite value accepted";
     } catch (const Error& e) {
       EXPECT_EQ(e.code(), ExitCode::kBadInput);
       const std::string m = e.what();
       EXPECT_NE(m.find("test.h5"), std::string::npos) << m;
-      EXPECT_NE(m.find("view 1 light 2 texel (y 3, x 4) channel 0"), std::string::npos) << m;
+      EXPECT_NE(m.find("view 1, light 2, texel (y 3, x 4), channel 0"), std::string::npos) << m;
       EXPECT_NE(m.find(std::isnan(bad) ? "NaN" : "Inf"), std::string::npos) << m;
     }
   }
@@ -139,7 +141,7 @@ TEST(EvalMetrics, RefusesIncompatibleInputs) {
   const Dataset ref = test::MakeTestDataset(2, 3, 4, 5);
   auto expect_bad = [&](const Dataset& t, const std::string& needle) {
     try {
-      Compare(*MemorySource(ref), *MemorySource(t));
+      Compare(CompareOptions(), *MemorySource(ref), *MemorySource(t));
       FAIL() << "incompatible inputs accepted";
     } catch (const Error& e) {
       EXPECT_EQ(e.code(), ExitCode::kBadInput);
@@ -163,8 +165,8 @@ TEST(EvalMetrics, FileStreamingMatchesMemoryAndWritesErrorMaps) {
   CompareOptions o;
   o.error_maps_dir = dir;
   o.error_maps = 2;
-  const auto a = Compare(*MemorySource(ref), *MemorySource(t));
-  const auto b = Compare(*OpenSource(dir / "ref.h5"), *OpenSource(dir / "test.h5"), o);
+  const auto a = Compare(CompareOptions(), *MemorySource(ref), *MemorySource(t));
+  const auto b = Compare(o, *OpenSource(dir / "ref.h5"), *OpenSource(dir / "test.h5"));
   EXPECT_DOUBLE_EQ(a.rmse, b.rmse);  // same values, same summation order
   EXPECT_DOUBLE_EQ(*a.mean_ssim, *b.mean_ssim);
   ASSERT_EQ(b.error_map_files.size(), 2u);

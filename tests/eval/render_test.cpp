@@ -5,7 +5,8 @@
 #include <cmath>
 
 #include "libbtf/compress/codec.h"
-#include "libbtf/eval/codec_source.h"
+#include "libbtf/compress/codec_source.h"
+#include "tests/codec_util.h"
 #include "tests/test_util.h"
 
 namespace btf {
@@ -81,7 +82,7 @@ TEST(EvalRender, CodecEvaluatorMatchesDatasetEvaluator) {
   CompressOptions co;
   co.method = CodecMethod::kPcaView;
   co.components = 9;  // lights - 1: lossless up to rounding
-  const Codec codec = Compress(d, co);
+  const Codec codec = test::CompressDataset(d, co);
   RenderOptions o;
   o.width = 40, o.height = 32;
   o.scene = "cylinder";

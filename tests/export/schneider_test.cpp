@@ -8,6 +8,7 @@
 #include "libbtf/core/error.h"
 #include "libbtf/export/schneider_reference_decoder.h"
 #include "tests/compress/synthetic.h"
+#include "tests/codec_util.h"
 #include "tests/test_util.h"
 
 namespace btf {
@@ -19,18 +20,18 @@ Codec SmallLpca() {
   o.method = CodecMethod::kLpca;
   o.clusters = 3;
   o.components = 2;
-  return Compress(d, o);
+  return test::CompressDataset(d, o);
 }
 
-TEST(SchneiderExport, ReferenceDecoderMatchesCodecToTheQuantisationError) {
+TEST(SchneiderExport, ReferenceDecoderMatchesCodecToTheQuantizationError) {
   const Codec codec = SmallLpca();
   const auto dir = test::TempDir() / "export";
   SchneiderExportOptions o;
   o.view_grid = 8;
   o.light_grid = 6;
-  const SchneiderExportSummary s = ExportSchneider(codec, dir, o);
+  const SchneiderExportSummary s = ExportSchneider(o, codec, dir);
   EXPECT_EQ(s.functions, 3);
-  EXPECT_LE(s.max_quantisation_error, 1.0 / 255 + 1e-12);  // half a step of 2/255
+  EXPECT_LE(s.max_quantization_error, 1.0 / 255 + 1e-12);  // half a step of 2/255
   const SchneiderReferenceDecoder ref(dir);
   double worst_ratio = 0;
   int checked = 0;
@@ -64,7 +65,7 @@ TEST(SchneiderExport, ReferenceDecoderMatchesCodecToTheQuantisationError) {
 TEST(SchneiderExport, FilesHaveTheManifestShapes) {
   const Codec codec = SmallLpca();
   const auto dir = test::TempDir() / "export";
-  ExportSchneider(codec, dir, {});
+  ExportSchneider({}, codec, dir);
   std::ifstream in(dir / "manifest.json");
   const auto j = nlohmann::json::parse(in);
   EXPECT_EQ(j["format"], "libbtf-schneider-export");
@@ -85,7 +86,7 @@ TEST(SchneiderExport, RefusesPerViewPcaAndLogCodecs) {
   CompressOptions o;
   o.components = 2;
   try {
-    ExportSchneider(Compress(d, o), test::TempDir() / "x");
+    ExportSchneider({}, test::CompressDataset(d, o), test::TempDir() / "x");
     FAIL();
   } catch (const Error& e) {
     EXPECT_EQ(e.code(), ExitCode::kUsage);
@@ -94,7 +95,7 @@ TEST(SchneiderExport, RefusesPerViewPcaAndLogCodecs) {
   o.method = CodecMethod::kLpca;
   o.clusters = 2;
   o.log_transform = true;
-  EXPECT_THROW(ExportSchneider(Compress(d, o), test::TempDir() / "y"), Error);
+  EXPECT_THROW(ExportSchneider({}, test::CompressDataset(d, o), test::TempDir() / "y"), Error);
 }
 
 }  // namespace

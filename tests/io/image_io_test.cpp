@@ -39,7 +39,7 @@ TEST(ImageIo, ExrFloatIsExactAndHalfIsClose) {
     EXPECT_NEAR(rh.pixels[i], img.pixels[i], std::abs(img.pixels[i]) * 1e-3 + 1e-4);
 }
 
-TEST(ImageIo, Png16LinearRoundTripsToQuantisation) {
+TEST(ImageIo, Png16LinearRoundTripsToQuantization) {
   const auto dir = test::TempDir();
   const Image img = Ramp(20, 10, 4);
   WriteImage(dir / "a.png", img);  // default: 16-bit, linear values, tagged linear

@@ -32,7 +32,7 @@ double CornerRms(const std::vector<TagDetection>& dets, const Board& board, cons
 TEST(Detect, FindsEveryMarkerWithSubPixelCornersInBoardOrder) {
   const Board board = test::MakeRingBoard(40, 8, 0);
   // Corner RMS bound 0.05 px (issue budget 0.1; noise-free renders with 8x8 supersampled edges,
-  // measured 0.000 at 0 deg and 0.012 at 60 deg). A wrong 0.5 px pixel-centre shift would give
+  // measured 0.000 at 0 deg and 0.012 at 60 deg). A wrong 0.5 px pixel-center shift would give
   // >= 0.7 px, a wrong corner order several px.
   for (double theta : {0.0, 45.0, 60.0}) {
     const auto cam = test::LookAt(theta, 30, 300, 900, 700, 2400);
@@ -110,13 +110,13 @@ TEST(Detect, BadOptionsAndFamiliesAreUsageErrors) {
   EXPECT_EQ(TagFamilies().size(), 9u);
 }
 
-TEST(Detect, GreyIsLinearAndScaledToThe995thPercentile) {
+TEST(Detect, GrayIsLinearAndScaledToThe995thPercentile) {
   Image im(100, 10, 3);
   for (int y = 0; y < 10; ++y)
     for (int x = 0; x < 100; ++x)
       for (int c = 0; c < 3; ++c) im.at(x, y, c) = x < 50 ? 0.2f : 0.4f;
   im.at(0, 0, 0) = std::nanf("");
-  const auto g = GreyForDetection(im);
+  const auto g = GrayForDetection(im);
   EXPECT_EQ(g[1], 128);  // 0.2 / 0.4 * 255 = 127.5 -> linear, no gamma
   EXPECT_EQ(g[99], 255);
   EXPECT_EQ(g[0], 0);  // a NaN channel makes the pixel 0, never NaN in the detector

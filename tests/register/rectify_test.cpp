@@ -38,7 +38,7 @@ AliasCase RunAliasCase() {
   RectifyOptions ours;
   ours.resolution = 64;
   RectifyOptions plain = ours;
-  plain.max_samples_per_axis = 1;  // one bilinear sample at the texel centre = plain warping
+  plain.max_samples_per_axis = 1;  // one bilinear sample at the texel center = plain warping
   RectifyStats st;
   const Image a = Rectify(photo, project, s, ours, &st);
   const Image b = Rectify(photo, project, s, plain);
@@ -69,9 +69,9 @@ TEST(Rectify, FootprintFilterBeatsPlainBilinearOnAnObliqueFinePattern) {
   EXPECT_LT(r.rms_ours * 5, r.rms_bilinear);
 }
 
-TEST(Rectify, TexelCentresFollowTheDocumentedConvention) {
+TEST(Rectify, TexelCentersFollowTheDocumentedConvention) {
   // Texel (0, 0) is the top-left: x = -S/2 + S/(2N), y = +S/2 - S/(2N).
-  const Vec2 c = TexelCentreMm(0, 0, 4, 40);
+  const Vec2 c = TexelCenterMm(0, 0, 4, 40);
   EXPECT_DOUBLE_EQ(c.x(), -15);
   EXPECT_DOUBLE_EQ(c.y(), 15);
   // With an identity-like map (1 px per mm, x right, y down, origin at pixel (50, 50)) a frontal
@@ -91,7 +91,7 @@ TEST(Rectify, TexelCentresFollowTheDocumentedConvention) {
   const Image t = Rectify(photo, map, 40, o, &st);
   for (int row = 0; row < 8; ++row)
     for (int col = 0; col < 8; ++col) {
-      const Vec2 c2 = TexelCentreMm(col, row, 8, 40);
+      const Vec2 c2 = TexelCenterMm(col, row, 8, 40);
       EXPECT_NEAR(t.at(col, row, 0), c2.x() + 2 * c2.y(), 1e-4);
     }
   EXPECT_EQ(st.invalid_fraction, 0);
@@ -101,7 +101,7 @@ TEST(Rectify, TexelCentresFollowTheDocumentedConvention) {
 
 TEST(Rectify, AreaWeightingAveragesExactlyThePixelsUnderTheTexel) {
   // Texel = 4 x 4 pixels, aligned: with area weighting the texel is the plain mean of those 16
-  // pixels (to float round-off), whatever their values; bilinear sampling mixes in neighbours.
+  // pixels (to float round-off), whatever their values; bilinear sampling mixes in neighbors.
   Image photo(32, 32, 1);
   for (int py = 0; py < 32; ++py)
     for (int px = 0; px < 32; ++px) photo.at(px, py, 0) = static_cast<float>((px * 7 + py * 13) % 5);
@@ -158,7 +158,7 @@ TEST(Radiometry, PointAndDirectionalLightsGiveBrdfUnits) {
   Image tex(8, 8, 3);
   for (int row = 0; row < 8; ++row)
     for (int col = 0; col < 8; ++col) {
-      const double e = IrradianceAt(p, TexelCentreMm(col, row, 8, 40));
+      const double e = IrradianceAt(p, TexelCenterMm(col, row, 8, 40));
       for (int c = 0; c < 3; ++c) tex.at(col, row, c) = static_cast<float>(p.exposure * e / kPi);
     }
   ApplyRadiometry(tex, p, 40);

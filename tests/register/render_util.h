@@ -2,7 +2,7 @@
 // Test-only renderer for registration: a pinhole camera looking at a plate with AprilTag markers
 // (tag36h11, drawn from libapriltag's own code tables) lying at height h above a textured
 // material surface z = 0. Pixels are area-integrated by k x k supersampling with ray casting, so
-// marker parallax and foreshortening are exact. OpenCV pixel convention (centres at integers).
+// marker parallax and foreshortening are exact. OpenCV pixel convention (centers at integers).
 #include <apriltag/apriltag.h>
 #include <apriltag/tag36h11.h>
 
@@ -23,13 +23,13 @@ namespace btf::test {
 inline Board MakeRingBoard(double sample_mm = 40, double tag_mm = 8, double height_mm = 0) {
   Board b;
   b.sample_size_mm = sample_mm;
-  const double off = sample_mm / 2 + 2 + tag_mm / 2 + tag_mm / 8;  // centre distance from origin (quiet zone)
-  const double centres[8][2] = {{-off, -off}, {0, -off}, {off, -off}, {off, 0}, {off, off}, {0, off}, {-off, off}, {-off, 0}};
+  const double off = sample_mm / 2 + 2 + tag_mm / 2 + tag_mm / 8;  // center distance from origin (quiet zone)
+  const double centers[8][2] = {{-off, -off}, {0, -off}, {off, -off}, {off, 0}, {off, off}, {0, off}, {-off, off}, {-off, 0}};
   for (int i = 0; i < 8; ++i) {
     Marker m;
     m.id = i;
     m.height_mm = height_mm;
-    const double cx = centres[i][0], cy = centres[i][1], h = tag_mm / 2;
+    const double cx = centers[i][0], cy = centers[i][1], h = tag_mm / 2;
     m.corners_mm = {Vec2(cx - h, cy - h), Vec2(cx + h, cy - h), Vec2(cx + h, cy + h), Vec2(cx - h, cy + h)};
     b.markers.push_back(m);
   }
@@ -100,7 +100,7 @@ class TagPainter {
   apriltag_family_t* fam_;
 };
 
-// Renders one grey (1 channel) or RGB photo. `material(x, y)` gives the material value at the
+// Renders one gray (1 channel) or RGB photo. `material(x, y)` gives the material value at the
 // surface; the plate (z = marker height) is white (0.9) outside the sample; markers on top.
 // Each pixel is probed with 5 rays; where they differ it is integrated with ss x ss rays
 // (ss = 8 puts tag edges to ~0.01 px; 3 x 3 leaves ~0.08 px staircase errors at 60 deg).
@@ -128,7 +128,7 @@ inline Image RenderPhoto(const TestCamera& cam, const Board& board, const std::f
 #pragma omp parallel for schedule(dynamic, 8)
   for (int py = 0; py < im.height; ++py)
     for (int px = 0; px < im.width; ++px) {
-      // Probes at the pixel's 4 corners and centre: a straight edge through the pixel separates
+      // Probes at the pixel's 4 corners and center: a straight edge through the pixel separates
       // at least two corners, so uniform probes mean a uniform pixel (features >> 1 px).
       double probe[5], lo = 1e300, hi = -1e300;
       for (int k = 0; k < 5; ++k) {

@@ -9,6 +9,7 @@
 #include "libbtf/io/dataset_io.h"
 #include "libbtf/synth/irawan2006.h"
 #include "tests/synth/generator_check.h"
+#include "tests/synth_util.h"
 #include "tests/test_util.h"
 
 namespace btf {
@@ -35,7 +36,7 @@ TEST(BtfGenerator, ErrorStaysWithinTheStratifiedBoundWhenWindowsDoNotAlign) {
   ASSERT_GT(model.HighlightFraction(o.lights[0], o.views[0]), 0.05);
   for (int s : {1, 9}) {
     o.samples = s;
-    const Dataset ds = GenerateBtf(model, o);
+    const Dataset ds = test::GenerateDataset(model, o);
     double mean = 0;
     for (std::size_t i = 0; i < ds.data().size(); i += 3) mean += ds.data()[i];
     mean /= ds.num_texels();
@@ -57,9 +58,9 @@ TEST(BtfGenerator, StreamedFileEqualsInMemoryAndCarriesProvenance) {
   o.tiles = 2;
   o.samples = 3;
   o.irregularity = 0.03;
-  const Dataset mem = GenerateBtf(*model, o);
+  const Dataset mem = test::GenerateDataset(*model, o);
   const auto dir = test::TempDir();
-  const BtfSummary s = WriteGeneratedBtf(*model, o, dir / "gt.h5");
+  const BtfSummary s = WriteGeneratedBtf(o, *model, dir / "gt.h5");
   EXPECT_EQ(s.texel_values, 3u * 2 * 12 * 12);
   EXPECT_EQ(s.model_evaluations, s.texel_values * 9);
   const Dataset file = ReadDataset(dir / "gt.h5");
@@ -103,13 +104,13 @@ TEST(BtfGenerator, BadOptionsAreUsageErrors) {
   const auto model = MakeIrawan2006Model("plain");
   BtfOptions o;
   o.resolution = 0;
-  EXPECT_THROW(GenerateBtf(*model, o), Error);
+  EXPECT_THROW(test::GenerateDataset(*model, o), Error);
   o.resolution = 4;
   o.samples = 0;
-  EXPECT_THROW(GenerateBtf(*model, o), Error);
+  EXPECT_THROW(test::GenerateDataset(*model, o), Error);
   o.samples = 2;
   o.tiles = -1;
-  EXPECT_THROW(GenerateBtf(*model, o), Error);
+  EXPECT_THROW(test::GenerateDataset(*model, o), Error);
 }
 
 TEST(BtfGenerator, BrdfDatasetMatchesEvalBrdf) {

@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "libbtf/synth/btf_generator.h"
+#include "tests/synth_util.h"
 #include "libbtf/synth/irawan2006.h"
 
 namespace btf::test {
@@ -37,7 +38,7 @@ inline double ExpectTexelMeanConverges(const std::string& preset, int resolution
   o.resolution = resolution;
   o.samples = samples;
   o.tiles = 1;
-  const Dataset ds = GenerateBtf(model, o);
+  const Dataset ds = test::GenerateDataset(model, o);
   const int grid = o.resolution * o.samples;  // strata per tile side
   // Stratum edges fall on unit boundaries, so only the ellipse arcs leave strata partly lit.
   // Each such stratum's jittered sample is an independent Bernoulli error of variance

@@ -8,6 +8,7 @@
 #include <random>
 
 #include "libbtf/core/error.h"
+#include "tests/synth/five_cases_oracle.h"
 
 namespace btf {
 namespace {
@@ -43,7 +44,7 @@ TEST(Irawan2006, CircularSegmentSeriesIsAccurateForTinyAngles) {
 }
 
 TEST(Irawan2006, EllipseAreaMatchesReferenceTable) {
-  // irawan-models.md 1.4: S = A_E / A_R from clipping a 2e5-gon (accurate to 1e-6), printed with
+  // S = A_E / A_R from clipping a 2e5-gon (accurate to 1e-6), printed with
   // 6 decimals. Tolerance 2e-6 = table accuracy + rounding.
   struct Row {
     double hx, hy, warp, weft;
@@ -53,14 +54,14 @@ TEST(Irawan2006, EllipseAreaMatchesReferenceTable) {
                       {-0.3, 0.6, 0.013988, 0.120088}, {0.6, -0.1, 0.269755, 0}};
   const EllipseSegment warp = TwillWarp(), weft = TwillWeft();
   for (const Row& r : rows) {
-    for (bool five : {false, true}) {
-      EXPECT_NEAR(EllipseWindowArea(warp, r.hx, r.hy, five) / 6.0, r.warp, 2e-6) << r.hx << "," << r.hy;
-      EXPECT_NEAR(EllipseWindowArea(weft, r.hx, r.hy, five) / 2.0, r.weft, 2e-6) << r.hx << "," << r.hy;
-    }
+    EXPECT_NEAR(EllipseWindowArea(warp, r.hx, r.hy) / 6.0, r.warp, 2e-6) << r.hx << "," << r.hy;
+    EXPECT_NEAR(EllipseWindowArea(weft, r.hx, r.hy) / 2.0, r.weft, 2e-6) << r.hx << "," << r.hy;
+    EXPECT_NEAR(test::FiveCaseWindowArea(warp, r.hx, r.hy) / 6.0, r.warp, 2e-6) << r.hx << "," << r.hy;
+    EXPECT_NEAR(test::FiveCaseWindowArea(weft, r.hx, r.hy) / 2.0, r.weft, 2e-6) << r.hx << "," << r.hy;
   }
   // h = 0: pi alpha beta / window area exactly.
   EXPECT_NEAR(EllipseWindowArea(warp, 0, 0) / 6, kPi * 3 * 3 * std::sqrt(1 - 0.995 * 0.995) / 6, 1e-14);
-  // Twill tile average at h = 0 (irawan-models.md 1.5): 0.524160.
+  // Twill tile average at h = 0 from the table's first row: (4 x 6 x 0.470649 + 4 x 2 x 0.684694) / 32.
   const Irawan2006Model m(Irawan2006Preset("twill"));
   EXPECT_NEAR(m.HighlightFraction(Vec3::UnitZ(), Vec3::UnitZ()), 0.524160, 2e-6);
 }
@@ -71,7 +72,7 @@ TEST(Irawan2006, CaseFreeMatchesFiveCasesOnRandomConfigurations) {
   int seen[6] = {0, 0, 0, 0, 0, 0};
   double max_diff = 0;
   for (int trial = 0; trial < 20000; ++trial) {
-    // Random ellipse that fits its window when centred (the five cases' assumption), random shift.
+    // Random ellipse that fits its window when centered (the five cases' assumption), random shift.
     EllipseSegment s;
     s.sx = 0.5 + 3 * U(rng);
     s.sy = 0.5 + 3 * U(rng);
@@ -93,10 +94,10 @@ TEST(Irawan2006, CaseFreeMatchesFiveCasesOnRandomConfigurations) {
       return Vec2((c * (x - cx) + sn * (y - cy)) / s.alpha, (-sn * (x - cx) + c * (y - cy)) / beta);
     };
     const double five =
-        DiskQuadAreaFiveCases({to_disk(0, 0), to_disk(s.sx, 0), to_disk(s.sx, s.sy), to_disk(0, s.sy)}, &which);
+        test::DiskQuadAreaFiveCases({to_disk(0, 0), to_disk(s.sx, 0), to_disk(s.sx, s.sy), to_disk(0, s.sy)}, &which);
     ASSERT_TRUE(std::isfinite(five)) << "configuration outside the five cases at trial " << trial;
     ++seen[which];
-    const double free = EllipseWindowArea(s, hx, hy, false) / (s.alpha * beta);
+    const double free = EllipseWindowArea(s, hx, hy) / (s.alpha * beta);
     // Both are exact formulas in double: agreement to 1e-11 of the disk area (pi).
     max_diff = std::max(max_diff, std::abs(free - five));
     ASSERT_NEAR(free, five, 1e-11 * kPi) << "trial " << trial << " case " << which;
@@ -110,7 +111,7 @@ TEST(Irawan2006, TinyCapsKeepRelativeAccuracy) {
   for (double d : {1 - 1e-6, 1 - 1e-9}) {
     const double theta = 2 * std::acos(d);
     const std::array<Vec2, 4> quad{Vec2(d, -3), Vec2(5, -3), Vec2(5, 3), Vec2(d, 3)};
-    const double five = DiskQuadAreaFiveCases(quad);
+    const double five = test::DiskQuadAreaFiveCases(quad);
     EXPECT_NEAR(five / CircularSegmentArea(theta), 1, 1e-6);  // acos(d) itself limits this
     // The case-free sum cancels O(1) terms: absolute accuracy ~1e-15 is what it promises.
     EXPECT_NEAR(DiskPolygonArea({quad.begin(), quad.end()}), five, 1e-14);
@@ -150,7 +151,7 @@ TEST(Irawan2006, StiffCasesStayFiniteAndContinuous) {
   }
   // Continuity of the analytic BRDF along paths that sweep highlights across window edges,
   // retro-reflection included: consecutive steps of 1e-6 rad may change f by at most 1e-3
-  // relative (the area is Lipschitz in the centre; a jump would be a case flip or a wrong sign).
+  // relative (the area is Lipschitz in the center; a jump would be a case flip or a wrong sign).
   for (const auto& m : models) {
     for (double phi_o : {0.0, 1.0, kPi / 2, 2.5}) {
       float prev[3];
@@ -176,7 +177,7 @@ TEST(Irawan2006, StiffCasesStayFiniteAndContinuous) {
 }
 
 TEST(Irawan2006, ContinuityWhereHighlightsLeaveTheWindow) {
-  // Scan h_y through the range where the warp ellipse centre crosses its window's top edge
+  // Scan h_y through the range where the warp ellipse center crosses its window's top edge
   // (k_y h_y = 1): the area must fall continuously to 0.
   const EllipseSegment warp = TwillWarp();
   double prev = EllipseWindowArea(warp, 0, 0.2);

@@ -16,6 +16,7 @@
 #include "libbtf/synth/apriltag_render.h"
 #include "libbtf/synth/btf_generator.h"
 #include "libbtf/synth/irawan2006.h"
+#include "tests/synth_util.h"
 #include "tests/test_util.h"
 
 namespace btf {
@@ -52,13 +53,13 @@ struct Detection {
 };
 
 std::vector<Detection> Detect(const Image& img) {
-  std::vector<std::uint8_t> grey(static_cast<std::size_t>(img.width) * img.height);
+  std::vector<std::uint8_t> gray(static_cast<std::size_t>(img.width) * img.height);
   for (int y = 0; y < img.height; ++y)
     for (int x = 0; x < img.width; ++x) {
       const double g = (img.at(x, y, 0) + img.at(x, y, 1) + img.at(x, y, 2)) / 3;
-      grey[static_cast<std::size_t>(y) * img.width + x] = static_cast<std::uint8_t>(std::clamp(g * 255 + 0.5, 0.0, 255.0));
+      gray[static_cast<std::size_t>(y) * img.width + x] = static_cast<std::uint8_t>(std::clamp(g * 255 + 0.5, 0.0, 255.0));
     }
-  image_u8_t im{img.width, img.height, img.width, grey.data()};
+  image_u8_t im{img.width, img.height, img.width, gray.data()};
   apriltag_family_t* tf = tag36h11_create();
   apriltag_detector_t* td = apriltag_detector_create();
   apriltag_detector_add_family_bits(td, tf, 1);
@@ -116,7 +117,7 @@ TEST(PhotoSynth, MarkersAreDetectedWhereTruthSaysUpTo75Degrees) {
     EXPECT_EQ(dets.size(), 8u) << "no false or duplicate detections";
     // A wrong corner order would put corners a tag side (> 100 px) off; a pixel-convention error
     // would show as a common offset of 0.5 px. What remains is AprilTag 3.3.0's own corner noise
-    // (integer-truncated edge refinement on 8-bit grey): measured up to 0.5 px per corner at
+    // (integer-truncated edge refinement on 8-bit gray): measured up to 0.5 px per corner at
     // 75 deg and a mean offset under 0.12 px.
     EXPECT_LT(mean_offset.norm(), 0.2) << "view " << view;
     EXPECT_LT(worst, 0.7) << "view " << view;
@@ -137,7 +138,7 @@ TEST(PhotoSynth, TruthCornersHoldWithDistortionAndRaisedMarkers) {
   o.k2 = 0.02;
   o.marker_height_mm = 1.5;
   const auto dir = test::TempDir();
-  SynthesizePhotos(*model, o, dir, {});
+  SynthesizePhotos(o, *model, dir, {});
   const auto truth = ReadTruth(dir / "truth.json");
   const Image img = ReadImage(dir / truth[0].file);
   const auto dets = Detect(img);
@@ -196,7 +197,7 @@ TEST(PhotoSynth, RectifiedPhotosReproduceGroundTruthNormtextures) {
   o.sample_tiles = 10;
   o.irregularity = 0.02;  // the BTF below uses the same warp: irregular but identical
   const auto dir = test::TempDir() / "photos";
-  const PhotoSummary sum = SynthesizePhotos(*model, o, dir, {});
+  const PhotoSummary sum = SynthesizePhotos(o, *model, dir, {});
   ASSERT_EQ(sum.photos, 6);
   const Manifest man = ReadManifest(dir / "manifest.json");
   const auto truth = ReadTruth(dir / "truth.json");
@@ -214,7 +215,7 @@ TEST(PhotoSynth, RectifiedPhotosReproduceGroundTruthNormtextures) {
   bo.samples = 16;
   bo.irregularity = o.irregularity;
   bo.irregularity_seed = o.irregularity_seed;
-  const Dataset gt = GenerateBtf(*model, bo);
+  const Dataset gt = test::GenerateDataset(*model, bo);
   double max_rel_rms = 0, max_mean_err = 0;
   for (std::size_t k = 0; k < man.photos.size(); ++k) {
     const PhotoEntry& e = man.photos[k];
@@ -246,7 +247,7 @@ TEST(PhotoSynth, RectifiedPhotosReproduceGroundTruthNormtextures) {
     max_mean_err = std::max(max_mean_err, std::abs(mean_r - mean_g) / mean_g);
     const double rel_rms = std::sqrt(se / sg), mean_err = std::abs(mean_r - mean_g) / mean_g;
     // The mean is preserved by the pixel box filter and bilinear resampling away from the
-    // sample border; 0.2 % covers 16-bit quantisation and the supersampling of both sides
+    // sample border; 0.2 % covers 16-bit quantization and the supersampling of both sides
     // (measured <= 0.06 %).
     EXPECT_LT(mean_err, 0.002) << e.file;
     // Per texel, the photo's pixel box filter and the bilinear lookup blur texel edges by about
@@ -269,11 +270,11 @@ TEST(PhotoSynth, ExrPhotosHoldRadianceAndPointLightFalloff) {
   o.format = "exr";
   o.light_distance_mm = 400;
   const auto dir = test::TempDir();
-  SynthesizePhotos(*model, o, dir, {});
+  SynthesizePhotos(o, *model, dir, {});
   const Manifest man = ReadManifest(dir / "manifest.json");
   ASSERT_EQ(man.bit_depth, 0);
   EXPECT_EQ(man.photos[0].exposure, 1);
-  EXPECT_EQ(man.photos[0].light_intensity, 400.0 * 400.0);  // auto: irradiance 1 at the centre
+  EXPECT_EQ(man.photos[0].light_intensity, 400.0 * 400.0);  // auto: irradiance 1 at the center
   const Image img = ReadImage(dir / man.photos[0].file);
   const auto truth = ReadTruth(dir / "truth.json");
   // White paper near a plate corner: L = 0.8/pi * I cos / r^2 exactly (pixel fully on paper).

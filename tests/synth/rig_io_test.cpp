@@ -87,7 +87,7 @@ TEST(RigIo, ManifestAndTruthRoundTrip) {
   EXPECT_EQ(p.file, e.file);
   EXPECT_EQ(p.view_index, 1);
   EXPECT_EQ(p.light_index, 10);
-  EXPECT_NEAR((p.view_dir - e.view_dir).norm(), 0, 1e-15);  // renormalised on read: last-bit changes only
+  EXPECT_NEAR((p.view_dir - e.view_dir).norm(), 0, 1e-15);  // renormalized on read: last-bit changes only
   EXPECT_EQ(p.exposure, 0.3);
   EXPECT_EQ(p.light_distance_mm, 1000);
   EXPECT_EQ(p.camera.fx, 1000.5);

@@ -199,7 +199,7 @@ TEST(WeavePattern, UnknownPresetListsTheKnownOnes) {
 }
 
 // The six Mitsuba/Lux presets: warpArea:weftArea equals the pattern's warp:weft cell count
-// (reference/irawan-models.md section 3); our Sadeghi layouts are built so that it does too.
+// (docs/btf-synth.md, "Irawan 2012"); our Sadeghi layouts are built so that it does too.
 TEST(WeavePattern, PresetAreasMatchCellCounts) {
   ASSERT_EQ(WeavePresetNames().size(), 12u);
   for (const auto& name : WeavePresetNames()) {

@@ -25,6 +25,7 @@ int main(int argc, char** argv) {
   CLI::App app{"Print the summary of a libbtf dataset or codec file: shape, samplings, conventions, size on disk, "
                "value range and NaN count.",
                "btf-info"};
+  btf::cli::Configure(app);
   btf::cli::CommonFlags common;
   std::string path;
   bool no_stats = false;
@@ -44,7 +45,7 @@ int main(int argc, char** argv) {
       throw btf::Error(btf::ExitCode::kBadInput,
                        fmt::format("'{}' holds format '{}', which this build of libbtf does not know", path, format));
     if (common.json)
-      btf::cli::PrintJson(j);
+      btf::cli::PrintJson(app, j);
     else
       PrintHuman(j);
     return 0;

@@ -16,14 +16,76 @@ nlohmann::json DetectionsJson(const std::string& path, const std::vector<btf::Ta
     tags.push_back({{"id", d.id},
                     {"hamming", d.hamming},
                     {"decision_margin", d.decision_margin},
-                    {"centre_px", {d.centre.x(), d.centre.y()}},
+                    {"center_px", {d.center.x(), d.center.y()}},
                     {"corners_px", c}});
   }
   return {{"image", path},
           {"family", family},
           {"corner_order", "left-bottom, right-bottom, right-top, left-top of the upright tag"},
-          {"pixel_convention", "OpenCV: (0,0) is the centre of the top-left pixel, y down"},
+          {"pixel_convention", "OpenCV: (0,0) is the center of the top-left pixel, y down"},
           {"tags", tags}};
+}
+
+struct RunFlags {
+  std::string manifest, output, report, sheet, family;
+  bool allow_missing = false, no_intrinsics = false, no_radiometry = false, half = false;
+  btf::RegisterOptions options;
+};
+
+int RunDetect(const CLI::App& app, const btf::cli::CommonFlags& common, const std::string& image,
+              btf::TagDetectorOptions options, bool no_refine) {
+  options.refine_corners = !no_refine;
+  const auto dets = btf::DetectInImage(image, options);
+  if (common.json) {
+    btf::cli::PrintJson(app, DetectionsJson(image, dets, options.family));
+    return 0;
+  }
+  fmt::print("{}: {} {} tag(s); corners px (OpenCV centers), order LB RB RT LT\n", image, dets.size(), options.family);
+  for (const auto& d : dets)
+    fmt::print("  id {:4d}  hamming {}  margin {:6.1f}  ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) "
+               "({:.2f}, {:.2f})\n",
+               d.id, d.hamming, d.decision_margin, d.corners[0].x(), d.corners[0].y(), d.corners[1].x(),
+               d.corners[1].y(), d.corners[2].x(), d.corners[2].y(), d.corners[3].x(), d.corners[3].y());
+  return 0;
+}
+
+int RunRegister(const CLI::App& app, const btf::cli::CommonFlags& common, RunFlags& f) {
+  btf::RegisterOptions& ro = f.options;
+  ro.use_intrinsics = !f.no_intrinsics;
+  ro.radiometry = !f.no_radiometry;
+  if (!f.family.empty()) ro.detector.family = f.family, ro.family_override = true;
+  if (f.half) ro.write.storage = btf::h5::Storage::kFloat16;
+  ro.Check();
+  const btf::RegisterSummary sum = btf::RegisterPhotos(ro, f.manifest, f.output, btf::cli::MakeReporter(common));
+  const nlohmann::json report = sum.ToJson();
+  if (!f.report.empty()) btf::WriteTextFileAtomic(f.report, btf::cli::JsonDocument(app, report).dump(2) + "\n");
+  if (!f.sheet.empty() && sum.contact_sheet.width > 0) {
+    btf::ImageWriteOptions wo;
+    wo.has_format = true;
+    wo.format = btf::PixelFormat::kUint8;
+    wo.srgb = true;
+    btf::WriteImage(f.sheet, sum.contact_sheet, wo);
+  }
+  nlohmann::json failures = nlohmann::json::array();
+  for (const auto& r : sum.reports)
+    if (!r.ok) failures.push_back({{"file", r.file}, {"error", r.error}});
+  if (common.json) {
+    nlohmann::json j = {{"output", f.output},         {"photos_total", sum.photos}, {"photos_ok", sum.photos_ok},
+                        {"photos_failed", sum.photos_failed}, {"failures", failures},
+                        {"shape", report["shape"]},   {"filled", report["filled"]}, {"seconds", report["seconds"]}};
+    if (report.contains("lattice")) j["lattice"] = report["lattice"];
+    if (!f.report.empty()) j["report"] = f.report;
+    if (!f.sheet.empty()) j["contact_sheet"] = f.sheet;
+    btf::cli::PrintJson(app, j);
+  } else {
+    fmt::print("{} -> {}\n{}", f.manifest, f.output, sum.Report());
+  }
+  if (sum.photos_failed > 0 && !f.allow_missing) {
+    fmt::print(stderr, "btf-register: error: {} of {} photos failed (listed above{}); pass --allow-missing to accept\n",
+               sum.photos_failed, sum.photos, f.report.empty() ? "" : " and in the report");
+    return static_cast<int>(btf::ExitCode::kBadInput);
+  }
+  return 0;
 }
 
 }  // namespace
@@ -31,6 +93,7 @@ nlohmann::json DetectionsJson(const std::string& path, const std::vector<btf::Ta
 int main(int argc, char** argv) {
   CLI::App app{"Register measurement photos (AprilTag markers) into a rectified BTF dataset, or detect markers.",
                "btf-register"};
+  btf::cli::Configure(app);
   app.require_subcommand(1);
   app.fallthrough();  // common flags may follow the subcommand
   btf::cli::CommonFlags common;
@@ -39,117 +102,45 @@ int main(int argc, char** argv) {
   // detect
   std::string d_image;
   btf::TagDetectorOptions dopt;
+  bool no_refine = false;
   auto* cd = app.add_subcommand("detect", "Detect AprilTag markers in one image and print ids and corners");
   cd->add_option("IMAGE", d_image, "Image file (any format OpenImageIO reads)")->required();
-  cd->add_option("--family", dopt.family, "Tag family")->capture_default_str();
-  cd->add_option("--max-hamming", dopt.max_hamming, "Drop detections correcting more bits")->capture_default_str();
-  cd->add_option("--min-margin", dopt.min_decision_margin, "Drop detections with a lower decision margin")
-      ->capture_default_str();
-  cd->add_option("--decimate", dopt.quad_decimate, "libapriltag quad_decimate")->capture_default_str();
+  cd->add_option("--family", dopt.family, "Tag family");
+  cd->add_option("--max-hamming", dopt.max_hamming, "Drop detections correcting more bits");
+  cd->add_option("--min-margin", dopt.min_decision_margin, "Drop detections with a lower decision margin");
+  cd->add_option("--decimate", dopt.quad_decimate, "libapriltag quad_decimate");
   cd->add_flag("--apriltag-refine", dopt.refine_edges, "Use libapriltag's refine_edges (biased in 3.3.0)");
-  bool no_refine = false;
   cd->add_flag("--no-refine", no_refine, "Skip our sub-pixel edge fit (raw libapriltag corners)");
 
   // run
-  std::string manifest, output, report, sheet, truth, tile_output = "tiling", family;
-  btf::RegisterOptions ro;
-  bool allow_missing = false, no_intrinsics = false, no_radiometry = false, half = false;
+  RunFlags rf;
+  btf::RegisterOptions& ro = rf.options;
   auto* cr = app.add_subcommand("run", "Register every photo of a manifest into a BTF dataset");
-  cr->add_option("MANIFEST", manifest, "manifest.json (btf-synth photos writes one)")->required();
-  cr->add_option("-o,--output", output, "Output dataset (.h5)")->required();
-  cr->add_option("--resolution", ro.rectify.resolution, "Normtexture side N in texels")->capture_default_str();
-  cr->add_option("--report", report, "Write the registration report (JSON) here");
-  cr->add_option("--contact-sheet", sheet, "Write a PNG contact sheet of the rectified views here");
-  cr->add_option("--thumb", ro.contact_sheet_thumb, "Contact-sheet thumbnail side, px")->capture_default_str();
+  cr->add_option("MANIFEST", rf.manifest, "manifest.json (btf-synth photos writes one)")->required();
+  cr->add_option("-o,--output", rf.output, "Output dataset (.h5)")->required();
+  cr->add_option("--resolution", ro.rectify.resolution, "Normtexture side N in texels");
+  cr->add_option("--report", rf.report, "Write the registration report (JSON) here");
+  cr->add_option("--contact-sheet", rf.sheet, "Write a PNG contact sheet of the rectified views here");
+  cr->add_option("--thumb", ro.contact_sheet_thumb, "Contact-sheet thumbnail side, px");
   cr->add_flag("--tile-average", ro.tile_average, "Estimate the weave lattice and average all unit tiles");
-  cr->add_option("--tile-output", tile_output, "With --tile-average: 'tiling' (N x N) or 'tile' (the averaged tile)")
-      ->capture_default_str();
-  cr->add_option("--trim", ro.tiles.trim_fraction, "Trimmed-mean fraction dropped at each end when averaging tiles")
-      ->capture_default_str();
-  cr->add_option("--max-yarns", ro.lattice.max_yarns_per_repeat, "Largest yarns-per-repeat searched (twill, satin)")
-      ->capture_default_str();
-  cr->add_flag("--allow-missing", allow_missing, "Exit 0 even if some photos fail (they are still reported)");
-  cr->add_option("--truth", truth, "truth.json (btf-synth photos): add errors against the truth to the report");
-  cr->add_option("--family", family, "Tag family (default: the board's)");
-  cr->add_flag("--no-intrinsics", no_intrinsics, "Ignore the manifest's camera: one homography per photo");
-  cr->add_flag("--no-radiometry", no_radiometry, "Store pixel / exposure (units 'relative') instead of BRDF");
-  cr->add_option("--samples-per-px", ro.rectify.samples_per_px, "Anti-aliasing: samples per photo pixel per axis")
-      ->capture_default_str();
-  cr->add_option("--max-samples", ro.rectify.max_samples_per_axis, "Anti-aliasing: cap on samples per texel axis")
-      ->capture_default_str();
-  cr->add_option("--min-markers", ro.geometry.min_markers, "Fewer usable markers fail the photo")->capture_default_str();
-  cr->add_option("--ransac-px", ro.geometry.ransac_threshold_px, "Outlier threshold for wrong markers, px")
-      ->capture_default_str();
-  cr->add_option("--max-rms", ro.geometry.max_rms_px, "Larger reprojection RMS fails the photo, px")
-      ->capture_default_str();
-  cr->add_option("--max-invalid", ro.max_invalid_fraction, "Fraction of texels allowed outside the photo")
-      ->capture_default_str();
-  cr->add_flag("--half", half, "Store float16 (default float32)");
+  cr->add_option("--tile-output", ro.tile_output, "With --tile-average: 'tiling' (N x N) or 'tile' (the averaged tile)");
+  cr->add_option("--trim", ro.tiles.trim_fraction, "Trimmed-mean fraction dropped at each end when averaging tiles");
+  cr->add_option("--max-yarns", ro.lattice.max_yarns_per_repeat, "Largest yarns-per-repeat searched (twill, satin)");
+  cr->add_flag("--allow-missing", rf.allow_missing, "Exit 0 even if some photos fail (they are still reported)");
+  cr->add_option("--truth", ro.truth, "truth.json (btf-synth photos): add errors against the truth to the report");
+  cr->add_option("--family", rf.family, "Tag family (default: the board's)");
+  cr->add_flag("--no-intrinsics", rf.no_intrinsics, "Ignore the manifest's camera: one homography per photo");
+  cr->add_flag("--no-radiometry", rf.no_radiometry, "Store pixel / exposure (units 'relative') instead of BRDF");
+  cr->add_option("--samples-per-px", ro.rectify.samples_per_px, "Anti-aliasing: samples per photo pixel per axis");
+  cr->add_option("--max-samples", ro.rectify.max_samples_per_axis, "Anti-aliasing: cap on samples per texel axis");
+  cr->add_option("--min-markers", ro.geometry.min_markers, "Fewer usable markers fail the photo");
+  cr->add_option("--ransac-px", ro.geometry.ransac_threshold_px, "Outlier threshold for wrong markers, px");
+  cr->add_option("--max-rms", ro.geometry.max_rms_px, "Larger reprojection RMS fails the photo, px");
+  cr->add_option("--max-invalid", ro.max_invalid_fraction, "Fraction of texels allowed outside the photo");
+  cr->add_flag("--half", rf.half, "Store float16 (default float32)");
 
   return btf::cli::Main(argc, argv, app, [&] {
-    btf::InstallSignalCleanup();
-    const btf::Reporter reporter = btf::cli::MakeReporter(common);
-    if (*cd) {
-      dopt.refine_corners = !no_refine;
-      const auto dets = btf::DetectInImage(d_image, dopt);
-      const nlohmann::json j = DetectionsJson(d_image, dets, dopt.family);
-      if (common.json) {
-        btf::cli::PrintJson(j);
-      } else {
-        fmt::print("{}: {} {} tag(s); corners px (OpenCV centres), order LB RB RT LT\n", d_image, dets.size(),
-                   dopt.family);
-        for (const auto& d : dets)
-          fmt::print("  id {:4d}  hamming {}  margin {:6.1f}  ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) "
-                     "({:.2f}, {:.2f})\n",
-                     d.id, d.hamming, d.decision_margin, d.corners[0].x(), d.corners[0].y(), d.corners[1].x(),
-                     d.corners[1].y(), d.corners[2].x(), d.corners[2].y(), d.corners[3].x(), d.corners[3].y());
-      }
-      return 0;
-    }
-    ro.tile_output = tile_output;
-    ro.truth = truth;
-    ro.use_intrinsics = !no_intrinsics;
-    ro.radiometry = !no_radiometry;
-    if (!family.empty()) ro.detector.family = family, ro.family_override = true;
-    if (half) ro.write.storage = btf::h5::Storage::kFloat16;
-    ro.Check();
-    const btf::RegisterSummary sum = btf::RegisterPhotos(manifest, output, ro, reporter);
-    const nlohmann::json rep = sum.ToJson();
-    if (!report.empty()) btf::WriteTextFileAtomic(report, rep.dump(2) + "\n");
-    if (!sheet.empty() && sum.contact_sheet.width > 0) {
-      btf::ImageWriteOptions wo;
-      wo.has_format = true;
-      wo.format = btf::PixelFormat::kUint8;
-      wo.srgb = true;
-      btf::WriteImage(sheet, sum.contact_sheet, wo);
-    }
-    nlohmann::json failures = nlohmann::json::array();
-    for (const auto& r : sum.reports)
-      if (!r.ok) failures.push_back({{"file", r.file}, {"error", r.error}});
-    if (common.json) {
-      nlohmann::json j = {{"output", output},       {"photos_total", sum.photos}, {"photos_ok", sum.photos_ok},
-                          {"photos_failed", sum.photos_failed}, {"failures", failures},
-                          {"shape", rep["shape"]},  {"filled", rep["filled"]},  {"times_s", rep["times_s"]}};
-      if (rep.contains("lattice")) j["lattice"] = rep["lattice"];
-      if (!report.empty()) j["report"] = report;
-      if (!sheet.empty()) j["contact_sheet"] = sheet;
-      btf::cli::PrintJson(j);
-    } else {
-      fmt::print("registered {}/{} photos -> {} ({} views x {} lights x {}x{} texels, {} filled) in {:.1f} s\n",
-                 sum.photos_ok, sum.photos, output, sum.views, sum.lights, sum.width, sum.height, sum.filled.size(),
-                 sum.times.Total());
-      if (sum.lattice)
-        fmt::print("lattice: a1 = ({:.3f}, {:.3f}), a2 = ({:.3f}, {:.3f}) texels, {} yarn cell(s) per repeat\n",
-                   sum.lattice->a1.x(), sum.lattice->a1.y(), sum.lattice->a2.x(), sum.lattice->a2.y(),
-                   sum.lattice->yarn_cells_per_repeat);
-      for (const auto& f : failures)
-        fmt::print("FAILED {}: {}\n", f["file"].get<std::string>(), f["error"].get<std::string>());
-    }
-    if (sum.photos_failed > 0 && !allow_missing) {
-      fmt::print(stderr, "btf-register: error: {} of {} photos failed (listed above{}); pass --allow-missing to accept\n",
-                 sum.photos_failed, sum.photos, report.empty() ? "" : " and in the report");
-      return static_cast<int>(btf::ExitCode::kBadInput);
-    }
-    return 0;
+    if (*cd) return RunDetect(app, common, d_image, dopt, no_refine);
+    return RunRegister(app, common, rf);
   });
 }

@@ -12,8 +12,15 @@
 
 #include "libbtf/core/atomic_file.h"
 #include "libbtf/core/error.h"
+#include "libbtf/core/version.h"
 
 namespace btf::cli {
+
+void Configure(CLI::App& app) {
+  app.set_version_flag("--version", fmt::format("{} {}", app.get_name(), Version()),
+                       "Print the libbtf version and exit");
+  app.option_defaults()->always_capture_default();
+}
 
 void AddCommonFlags(CLI::App& app, CommonFlags& flags) {
   app.add_flag("--json", flags.json, "Print a JSON summary on stdout (logs stay on stderr)");
@@ -85,7 +92,84 @@ Reporter MakeReporter(const CommonFlags& flags) {
       });
 }
 
-void PrintJson(const nlohmann::json& j) { std::cout << j.dump(2) << std::endl; }
+namespace {
+
+bool IsCommonFlag(const std::string& name) {
+  return name == "help" || name == "version" || name == "json" || name == "quiet" || name == "verbose";
+}
+
+// A CLI11 value (given or default) as JSON: numbers, booleans and lists typed, the rest strings.
+nlohmann::json ValueJson(const std::string& text) {
+  if (text == "true" || text == "false") return text == "true";
+  if (!text.empty()) {
+    char* end = nullptr;
+    const double v = std::strtod(text.c_str(), &end);
+    if (end && *end == '\0') {
+      if (text.find_first_of(".eEn") == std::string::npos && std::abs(v) < 9e15) return static_cast<std::int64_t>(v);
+      return v;
+    }
+  }
+  if (text.size() >= 2 && text.front() == '[' && text.back() == ']') {
+    nlohmann::json a = nlohmann::json::array();
+    std::size_t pos = 1;
+    while (pos < text.size() - 1) {
+      const std::size_t comma = std::min(text.find(',', pos), text.size() - 1);
+      a.push_back(ValueJson(text.substr(pos, comma - pos)));
+      pos = comma + 1;
+    }
+    return a;
+  }
+  return text;
+}
+
+std::string OptionKey(const CLI::Option& o) {
+  std::string name = !o.get_lnames().empty() ? o.get_lnames().front()
+                     : !o.get_snames().empty() ? o.get_snames().front() : o.get_name();
+  for (auto& c : name) c = c == '-' ? '_' : static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return name;
+}
+
+}  // namespace
+
+nlohmann::json EffectiveOptions(const CLI::App& app) {
+  nlohmann::json j = nlohmann::json::object();
+  for (const CLI::Option* o : app.get_options()) {
+    const std::string key = OptionKey(*o);
+    if (IsCommonFlag(key)) continue;
+    if (o->get_expected_max() == 0) {  // a flag
+      j[key] = o->count() > 0;
+      continue;
+    }
+    if (o->count() > 0) {
+      const auto& r = o->results();
+      if (r.size() == 1) {
+        j[key] = ValueJson(r.front());
+      } else {
+        nlohmann::json a = nlohmann::json::array();
+        for (const auto& v : r) a.push_back(ValueJson(v));
+        j[key] = a;
+      }
+    } else {
+      j[key] = o->get_default_str().empty() ? nlohmann::json(nullptr) : ValueJson(o->get_default_str());
+    }
+  }
+  for (const CLI::App* sub : app.get_subcommands())
+    if (sub->parsed()) j[sub->get_name()] = EffectiveOptions(*sub);
+  return j;
+}
+
+nlohmann::json JsonDocument(const CLI::App& app, const nlohmann::json& summary) {
+  nlohmann::json j = {{"tool", app.get_name()},
+                      {"version", Version()},
+                      {"schema_version", kJsonSchemaVersion},
+                      {"options", EffectiveOptions(app)}};
+  for (const auto& [k, v] : summary.items()) j[k] = v;
+  return j;
+}
+
+void PrintJson(const CLI::App& app, const nlohmann::json& summary) {
+  std::cout << JsonDocument(app, summary).dump(2) << std::endl;
+}
 
 int Main(int argc, char** argv, CLI::App& app, const std::function<int()>& run) {
   InstallSignalCleanup();
@@ -101,7 +185,10 @@ int Main(int argc, char** argv, CLI::App& app, const std::function<int()>& run) 
     }
     return run();
   } catch (const Error& e) {
-    std::fprintf(stderr, "%s: error: %s\n", app.get_name().c_str(), e.what());
+    if (e.code() == ExitCode::kInternal)
+      std::fprintf(stderr, "%s: internal error: %s (please report this)\n", app.get_name().c_str(), e.what());
+    else
+      std::fprintf(stderr, "%s: error: %s\n", app.get_name().c_str(), e.what());
     return static_cast<int>(e.code());
   } catch (const std::bad_alloc&) {
     std::fprintf(stderr, "%s: error: out of memory; use a smaller input or subset\n", app.get_name().c_str());

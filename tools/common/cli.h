@@ -2,10 +2,12 @@
 // Shared plumbing for the libbtf command-line tools: common flags, logging to stderr, a
 // TTY-aware progress display, JSON on stdout, and one top-level error handler that maps
 // btf::Error to the documented exit codes (docs/errors.md).
+#include <cstdio>
 #include <functional>
 #include <string>
 
 #include <CLI/CLI.hpp>
+#include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
 #include "libbtf/core/progress.h"
@@ -18,14 +20,27 @@ struct CommonFlags {
   bool verbose = false;
 };
 
+// Call right after constructing a tool's app, before declaring options: --version, and every
+// option's default captured from the options struct it binds (so --help and the JSON show it).
+void Configure(CLI::App& app);
+
 void AddCommonFlags(CLI::App& app, CommonFlags& flags);
 
 // Reporter that logs to stderr and shows progress: a redrawn bar on a terminal, plain
 // "[i/N] stage" lines otherwise; silent with --quiet.
 Reporter MakeReporter(const CommonFlags& flags);
 
-// Prints one JSON document on stdout.
-void PrintJson(const nlohmann::json& j);
+// The options as the tool applied them: every option of the app and of the subcommands that ran
+// (given or default), keyed by long name without dashes (positionals by name, lower case);
+// subcommands nest under their name. Common flags (--json, --quiet, ...) are left out.
+nlohmann::json EffectiveOptions(const CLI::App& app);
+
+// Prints one --json document on stdout: {"tool", "version", "schema_version", "options"} followed
+// by the summary's keys (docs/architecture.md, "JSON output").
+void PrintJson(const CLI::App& app, const nlohmann::json& summary);
+
+// The document PrintJson prints.
+nlohmann::json JsonDocument(const CLI::App& app, const nlohmann::json& summary);
 
 // Runs a tool: `setup` declares options and subcommands on the app; after parsing, `run` does
 // the work and returns the exit code. Errors are printed as "<tool>: error: <message>" and
@@ -34,5 +49,18 @@ int Main(int argc, char** argv, CLI::App& app, const std::function<int()>& run);
 
 // Parses "1,2,5-7" into indices.
 std::vector<int> ParseIndexList(const std::string& text, const std::string& option);
+
+// Prints a summary: its text report, or with --json the JSON document.
+template <typename Summary>
+void PrintSummary(const CLI::App& app, const CommonFlags& flags, const Summary& summary,
+                  const nlohmann::json& extra = nlohmann::json::object()) {
+  if (flags.json) {
+    nlohmann::json j = summary.ToJson();
+    j.update(extra);
+    PrintJson(app, j);
+  } else {
+    std::fputs(summary.Report().c_str(), stdout);
+  }
+}
 
 }  // namespace btf::cli

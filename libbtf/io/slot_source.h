@@ -1,8 +1,8 @@
 #pragma once
 // A BTF read view slot by view slot, whatever stores it: a dataset file (streamed through
-// DatasetReader), an in-memory Dataset, or a codec file (decoded through libbtf/compress).
-// Metrics need only this interface, so a comparison never holds more than one view slot of each
-// input in memory.
+// DatasetReader), an in-memory Dataset, or a codec (libbtf/compress/codec_source.h). Compression
+// and metrics need only this interface, so neither holds more than a few view slots of an input
+// in memory.
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -35,16 +35,15 @@ class SlotSource {
 
 // The in-memory dataset must outlive the source.
 std::unique_ptr<SlotSource> MemorySource(const Dataset& dataset, std::string name = "in-memory dataset");
-// Opens a dataset or codec file, chosen by its "format" attribute (FileFormatOf). Other libbtf
-// formats and foreign files throw btf::Error (bad input) naming the file.
-std::unique_ptr<SlotSource> OpenSource(const std::filesystem::path& path);
+// A dataset file ("libbtf-dataset"), read one slot at a time; bad files throw btf::Error naming it.
+std::unique_ptr<SlotSource> OpenDatasetSource(const std::filesystem::path& path);
 
 // Throws btf::Error (bad input) unless both have the same shape and samplings (directions equal to
 // 1e-6, about 0.2 arc seconds); the message names both inputs and the first difference.
 void CheckCompatible(const SlotSource& reference, const SlotSource& test);
 
-// Throws btf::Error (bad input) at the first NaN or Inf in one view slot, naming the input, view,
-// light, texel and channel.
+// Throws btf::Error (bad input) at the first NaN or Inf in one view slot (lights x height x
+// width x channels of `source`), naming the input, view, light, texel and channel.
 void CheckFiniteSlot(const SlotSource& source, int view, const float* slot);
 
 }  // namespace btf

@@ -1,4 +1,4 @@
-#include "libbtf/eval/stability.h"
+#include "libbtf/stability/stability.h"
 
 #include <unistd.h>
 
@@ -11,7 +11,8 @@
 
 #include "libbtf/compress/codec.h"
 #include "libbtf/core/error.h"
-#include "libbtf/eval/codec_source.h"
+#include "libbtf/core/hash.h"
+#include "libbtf/compress/codec_source.h"
 #include "libbtf/eval/metrics.h"
 #include "libbtf/eval/render.h"
 #include "libbtf/io/dataset_io.h"
@@ -122,11 +123,9 @@ Dataset MakeData(int views, int lights, int size, const std::function<double(int
   return d;
 }
 
-double Hash(int a, int b, int c, int d, int e) {
-  std::uint32_t h = 2166136261u;
-  for (int v : {a, b, c, d, e}) h = (h ^ std::uint32_t(v + 7)) * 16777619u;
-  h ^= h >> 13, h *= 0x5bd1e995u, h ^= h >> 15;
-  return (h & 0xFFFFFF) / double(0x1000000);
+// Reproducible noise in [0, 1) for test data, keyed by (v, l, y, x, c).
+double Noise(int v, int l, int y, int x, int c) {
+  return HashUniform(std::uint64_t(v) << 32 | std::uint32_t(l), std::uint64_t(y) << 32 | std::uint32_t(x), c);
 }
 
 struct RoundTrip {
@@ -143,13 +142,14 @@ RoundTrip Roundtrip(const Dataset& d, CodecMethod method, int components, int cl
   o.clusters = std::max(clusters, 1);  // pca-view ignores it
   o.log_transform = log_transform;
   RoundTrip r;
-  const Codec codec = Compress(d, o, Reporter(), &r.summary);
+  Codec codec;
+  r.summary = Compress(o, *MemorySource(d), &codec);
   const Dataset out = codec.DecodeAll();
   for (float v : out.data()) r.non_finite += !std::isfinite(v);
   if (r.non_finite) return r;
   CompareOptions co;
   co.ssim = false;
-  r.errors = Compare(*MemorySource(d, "input"), *MemorySource(out, "decoded"), co);
+  r.errors = Compare(co, *MemorySource(d, "input"), *MemorySource(out, "decoded"));
   return r;
 }
 
@@ -190,6 +190,190 @@ double MedianRelativeError(const Dataset& a, const Dataset& b) {
   return rel[rel.size() / 2];
 }
 
+// ---- The cases: one function each; Cases() lists them with their names and criteria. ----------
+
+std::vector<std::pair<Vec3, Vec3>> GrazingAndRetroPairs() {
+  auto pairs = GrazingPairs();
+  const auto retro = RetroPairs();
+  pairs.insert(pairs.end(), retro.begin(), retro.end());
+  return pairs;
+}
+
+Outcome Irawan2006Eccentricity() {
+  const nlohmann::json p = {{"warp", {{"eta", 0.999999}}}, {"weft", {{"eta", 0.999999}}}};
+  const auto model = MakeModel("irawan2006", "twill", p);
+  const Outcome o = JudgeScan(ScanModel(*model, GrazingAndRetroPairs()), true);
+  const Outcome r =
+      ExpectRefused([] { MakeModel("irawan2006", "twill", {{"warp", {{"eta", 1.0}}}}); }, ExitCode::kUsage, "eta");
+  return Outcome{o.passed && r.passed, o.figure + "; eta = 1: " + r.figure};
+}
+
+// An Irawan 2012 model from the first weave preset with `edit` applied (written to a .wv file).
+std::unique_ptr<SvbrdfModel> EditedWeave(const std::string& what, const std::function<void(WeavePattern&)>& edit,
+                                         const std::filesystem::path& tmp) {
+  WeavePattern w = WeavePreset(WeavePresetNames().front());
+  edit(w);
+  const auto path = tmp / (what + ".wv");
+  std::ofstream(path) << FormatWeavePattern(w);
+  return MakeModel("irawan2012", path.string());
+}
+
+Outcome Irawan2012Kappa(const std::filesystem::path& tmp) {
+  const auto model = EditedWeave("kappa_near", [](WeavePattern& w) { for (auto& y : w.yarns) y.kappa = -0.999; }, tmp);
+  const Outcome o = JudgeScan(ScanModel(*model, GrazingAndRetroPairs()), true);
+  const Outcome r = ExpectRefused([&] { EditedWeave("kappa_edge", [](WeavePattern& w) { w.yarns[0].kappa = -1; }, tmp); },
+                                  ExitCode::kBadInput, "kappa");
+  return Outcome{o.passed && r.passed, o.figure + "; kappa = -1: " + r.figure};
+}
+
+Outcome Irawan2012Umax(double umax_deg, const std::filesystem::path& tmp) {
+  const auto model = EditedWeave(fmt::format("umax{:g}", umax_deg), [&](WeavePattern& w) {
+    for (auto& y : w.yarns) y.psi = 0, y.umax = DegToRad(umax_deg);
+  }, tmp);
+  return JudgeScan(ScanModel(*model, GrazingAndRetroPairs()), true);
+}
+
+Outcome BarycentricGrazing() {
+  const Sampling s = Sampling::Bonn81();
+  double worst_sum = 0;
+  int bad = 0, n = 0;
+  for (double t : {0.0, 1e-9, 30.0, 75.0, 80.0, 85.0, 89.0, 89.9, 89.99, 90.0, 95.0})
+    for (int p = 0; p < 24; ++p) {
+      const Interpolant ip = s.Barycentric(DirectionFromAngles(DegToRad(t), DegToRad(15.0 * p + 0.5)));
+      double sum = 0;
+      for (int k = 0; k < ip.count; ++k) {
+        if (!std::isfinite(ip.weight[k]) || ip.weight[k] < 0 || ip.index[k] < 0 || ip.index[k] >= 81) ++bad;
+        sum += ip.weight[k];
+      }
+      worst_sum = std::max(worst_sum, std::abs(sum - 1));
+      ++n;
+    }
+  return Outcome{bad == 0 && worst_sum <= 1e-12,
+                 fmt::format("{} directions: {} bad weights, max |sum - 1| = {:.3g}", n, bad, worst_sum)};
+}
+
+Outcome CompressHugeDynamicRange() {
+  const Dataset d = HdrData();
+  Outcome o{true, ""};
+  for (CodecMethod m : {CodecMethod::kPcaView, CodecMethod::kLpca}) {
+    double med[2];
+    std::uint64_t bad = 0;
+    for (int log = 0; log < 2; ++log) {
+      CompressOptions co;
+      co.method = m;
+      co.components = 2;
+      co.clusters = 4;
+      co.log_transform = log;
+      co.log_epsilon = 1e-7;  // below the smallest value, so the log resolves it
+      Codec codec;
+      Compress(co, *MemorySource(d), &codec);
+      const Dataset out = codec.DecodeAll();
+      for (float v : out.data()) bad += !std::isfinite(v);
+      med[log] = bad ? std::numeric_limits<double>::infinity() : MedianRelativeError(d, out);
+    }
+    const bool ok = bad == 0 && med[1] < 0.1 && med[1] < med[0];
+    o.passed = o.passed && ok;
+    o.figure += fmt::format("{}{}: median relative error {:.3g} without log, {:.3g} with log, {} non-finite",
+                            o.figure.empty() ? "" : "; ", MethodLabel(m, 2, 4), med[0], med[1], bad);
+  }
+  return o;
+}
+
+Outcome MetricsHugeDynamicRange() {
+  const Dataset a = HdrData();
+  Dataset b = a;
+  for (auto& v : b.data()) v = float(double(v) * (1 + 1e-3));
+  const auto s = Compare(CompareOptions(), *MemorySource(a), *MemorySource(b));
+  const double rel = s.rel_l2.value_or(-1);
+  return Outcome{std::abs(rel - 1e-3) <= 1e-6 && s.psnr_db && std::isfinite(*s.psnr_db) && s.mean_ssim &&
+                     std::isfinite(*s.mean_ssim),
+                 fmt::format("rel L2 {:.9g}, PSNR {:.3f} dB, SSIM {:.6f}", rel, s.psnr_db.value_or(0),
+                             s.mean_ssim.value_or(0))};
+}
+
+Outcome CompressRank1() {
+  const Dataset d = MakeData(4, 6, 8, [](int v, int l, int y, int x, int c) {
+    return (0.2 + 0.1 * std::sin(x + 2.0 * y)) * (1.0 + 0.5 * std::cos(v + 0.7 * l)) * (1 + 0.3 * c);
+  });
+  return RoundTripsWithin(d, 1e-5, {{CodecMethod::kPcaView, 1, 0}, {CodecMethod::kPcaView, 8, 0},
+                                    {CodecMethod::kLpca, 1, 1}, {CodecMethod::kLpca, 8, 4}});
+}
+
+Outcome CompressConstant() {
+  Outcome o{true, ""};
+  for (double value : {0.37, 0.0}) {
+    const Dataset d = MakeData(3, 5, 8, [value](int, int, int, int, int) { return value; });
+    const Outcome r = RoundTripsWithin(d, 1e-6, {{CodecMethod::kPcaView, 4, 0}, {CodecMethod::kLpca, 4, 4}});
+    o.passed = o.passed && r.passed;
+    o.figure += fmt::format("{}value {:g}: {}", o.figure.empty() ? "" : "; ", value, r.figure);
+  }
+  return o;
+}
+
+Outcome CompressNearDuplicateTexels() {
+  const Dataset d = MakeData(3, 6, 12, [](int v, int l, int y, int x, int c) {
+    return (0.3 + 0.2 * std::sin(v + 0.5 * l + c)) * (1 + 1e-7 * (Noise(v, l, y, x, c) - 0.5));
+  });
+  return RoundTripsWithin(d, 1e-5, {{CodecMethod::kPcaView, 2, 0}, {CodecMethod::kLpca, 2, 8}});
+}
+
+Outcome CompressSingleViewOrLight() {
+  auto f = [](int v, int l, int y, int x, int c) { return 0.1 + 0.05 * Noise(v, l, y, x, c) + 0.02 * (v + l); };
+  const Outcome a = RoundTripsWithin(MakeData(1, 6, 6, f), 1e-5, {{CodecMethod::kPcaView, 32, 0}, {CodecMethod::kLpca, 32, 1}});
+  const Outcome b = RoundTripsWithin(MakeData(5, 1, 6, f), 1e-5, {{CodecMethod::kPcaView, 32, 0}, {CodecMethod::kLpca, 32, 1}});
+  return Outcome{a.passed && b.passed, "1 view: " + a.figure + " | 1 light: " + b.figure};
+}
+
+Outcome CompressMoreClustersThanTexels() {
+  const Dataset d = MakeData(3, 4, 2, [](int v, int l, int y, int x, int c) { return 0.2 + Noise(v, l, y, x, c); });
+  const RoundTrip r = Roundtrip(d, CodecMethod::kLpca, 2, 32);
+  const double rel = r.errors.rel_l2.value_or(1e30);
+  const bool ok = r.non_finite == 0 && r.summary.clusters == 4 && !r.summary.warnings.empty() && rel <= 1e-5;
+  return Outcome{ok, fmt::format("stored clusters {}, {} warning(s), rel L2 {:.3g}, {} non-finite", r.summary.clusters,
+                                 r.summary.warnings.size(), rel, r.non_finite)};
+}
+
+Outcome NonFiniteInputRefused(const std::string& b, const std::filesystem::path& tmp) {
+  Dataset d = MakeData(2, 3, 4, [](int v, int l, int y, int x, int c) { return 0.1 + Noise(v, l, y, x, c); });
+  const Dataset clean = d;
+  d.at(1, 2, 3, 0, 1) = b == "NaN" ? std::numeric_limits<float>::quiet_NaN() : std::numeric_limits<float>::infinity();
+  const auto file = tmp / ("bad_" + b + ".h5");
+  WriteDataset(file, d);
+  std::string figure;
+  bool ok = true;
+  for (CodecMethod m : {CodecMethod::kPcaView, CodecMethod::kLpca}) {
+    CompressOptions co;
+    co.method = m;
+    co.components = 2, co.clusters = 2;
+    Codec codec;
+    const Outcome a = ExpectRefused([&] { Compress(co, *MemorySource(d), &codec); }, ExitCode::kBadInput, b);
+    const Outcome f = ExpectRefused([&] { Compress(co, *OpenDatasetSource(file), &codec); }, ExitCode::kBadInput, b);
+    ok = ok && a.passed && f.passed;
+    figure += fmt::format("{} memory: {}; file: {}; ", MethodName(m), a.figure, f.figure);
+  }
+  const Outcome mt =
+      ExpectRefused([&] { Compare(CompareOptions(), *MemorySource(clean), *OpenSource(file)); }, ExitCode::kBadInput, b);
+  return Outcome{ok && mt.passed, figure + "metrics: " + mt.figure};
+}
+
+Outcome RenderHugeDynamicRange() {
+  const Dataset d = HdrData();
+  RenderOptions ro;
+  ro.scene = "cylinder";
+  ro.lighting = "environment";
+  ro.width = 48, ro.height = 40;
+  const Image img = Render(*DatasetEvaluator(d), ro);
+  int bad = 0;
+  double mx = 0;
+  for (float v : img.pixels) {
+    if (!std::isfinite(v) || v < 0)
+      ++bad;
+    else
+      mx = std::max(mx, double(v));
+  }
+  return Outcome{bad == 0, fmt::format("{} pixels values, {} non-finite or negative, max {:.4g}", img.pixels.size(), bad, mx)};
+}
+
 struct Case {
   std::string name;
   std::string stage;
@@ -198,216 +382,62 @@ struct Case {
 };
 
 std::vector<Case> Cases() {
+  using Path = const std::filesystem::path&;
   std::vector<Case> cases;
   for (const char* model : {"irawan2006", "irawan2012", "sadeghi2013"}) {
     const std::string m = model;
     cases.push_back({"grazing/" + m, "synth",
                      "theta 85-89.99 deg for wi and wo: every value finite and >= 0; exactly 0 below the horizon",
-                     [m](const std::filesystem::path&) { return JudgeScan(ScanModel(*NamedModel(m), GrazingPairs()), true); }});
-    cases.push_back({"retro-reflection/" + m, "synth",
-                     "wi = wo from the pole to theta 89.99 deg: every value finite and >= 0",
-                     [m](const std::filesystem::path&) { return JudgeScan(ScanModel(*NamedModel(m), RetroPairs()), false); }});
+                     [m](Path) { return JudgeScan(ScanModel(*NamedModel(m), GrazingPairs()), true); }});
+    cases.push_back({"retro-reflection/" + m, "synth", "wi = wo from the pole to theta 89.99 deg: every value finite and >= 0",
+                     [m](Path) { return JudgeScan(ScanModel(*NamedModel(m), RetroPairs()), false); }});
   }
   cases.push_back({"irawan2006/eccentricity", "synth",
                    "eta = 0.999999 (warp and weft): finite, >= 0 at grazing and retro directions; eta = 1 refused (usage)",
-                   [](const std::filesystem::path&) {
-                     const nlohmann::json p = {{"warp", {{"eta", 0.999999}}}, {"weft", {{"eta", 0.999999}}}};
-                     const auto model = MakeModel("irawan2006", "twill", p);
-                     auto pairs = GrazingPairs();
-                     const auto retro = RetroPairs();
-                     pairs.insert(pairs.end(), retro.begin(), retro.end());
-                     Outcome o = JudgeScan(ScanModel(*model, pairs), true);
-                     const Outcome r = ExpectRefused(
-                         [] { MakeModel("irawan2006", "twill", {{"warp", {{"eta", 1.0}}}}); }, ExitCode::kUsage, "eta");
-                     return Outcome{o.passed && r.passed, o.figure + "; eta = 1: " + r.figure};
-                   }});
-  auto weave_case = [](const std::string& what, const std::function<void(WeavePattern&)>& edit,
-                       const std::filesystem::path& tmp) {
-    WeavePattern w = WeavePreset(WeavePresetNames().front());
-    edit(w);
-    const auto path = tmp / (what + ".wv");
-    std::ofstream(path) << FormatWeavePattern(w);
-    return MakeModel("irawan2012", path.string());
-  };
+                   [](Path) { return Irawan2006Eccentricity(); }});
   cases.push_back({"irawan2012/kappa", "synth",
                    "kappa = -0.999 (every yarn): finite, >= 0 at grazing and retro directions; kappa = -1 refused (bad input)",
-                   [weave_case](const std::filesystem::path& tmp) {
-                     const auto model = weave_case("kappa_near", [](WeavePattern& w) { for (auto& y : w.yarns) y.kappa = -0.999; }, tmp);
-                     auto pairs = GrazingPairs();
-                     const auto retro = RetroPairs();
-                     pairs.insert(pairs.end(), retro.begin(), retro.end());
-                     Outcome o = JudgeScan(ScanModel(*model, pairs), true);
-                     const Outcome r = ExpectRefused(
-                         [&] { weave_case("kappa_edge", [](WeavePattern& w) { w.yarns[0].kappa = -1; }, tmp); },
-                         ExitCode::kBadInput, "kappa");
-                     return Outcome{o.passed && r.passed, o.figure + "; kappa = -1: " + r.figure};
-                   }});
-  for (double umax_deg : {0.0, 90.0}) {
+                   Irawan2012Kappa});
+  for (double umax_deg : {0.0, 90.0})
     cases.push_back({fmt::format("irawan2012/umax={:g}", umax_deg), "synth",
                      "umax at the edge of [0, 90] deg for every yarn (filaments, psi = 0): every value finite and >= 0",
-                     [weave_case, umax_deg](const std::filesystem::path& tmp) {
-                       const auto model = weave_case(fmt::format("umax{:g}", umax_deg), [&](WeavePattern& w) {
-                         for (auto& y : w.yarns) y.psi = 0, y.umax = DegToRad(umax_deg);
-                       }, tmp);
-                       auto pairs = GrazingPairs();
-                       const auto retro = RetroPairs();
-                       pairs.insert(pairs.end(), retro.begin(), retro.end());
-                       return JudgeScan(ScanModel(*model, pairs), true);
-                     }});
-  }
+                     [umax_deg](Path tmp) { return Irawan2012Umax(umax_deg, tmp); }});
   cases.push_back({"directions/barycentric-grazing", "directions",
                    "Bonn 81 barycentric weights for theta 0-90 deg and below: finite, >= 0, summing to 1 within 1e-12",
-                   [](const std::filesystem::path&) {
-                     const Sampling s = Sampling::Bonn81();
-                     double worst_sum = 0;
-                     int bad = 0, n = 0;
-                     for (double t : {0.0, 1e-9, 30.0, 75.0, 80.0, 85.0, 89.0, 89.9, 89.99, 90.0, 95.0})
-                       for (int p = 0; p < 24; ++p) {
-                         const Interpolant ip = s.Barycentric(DirectionFromAngles(DegToRad(t), DegToRad(15.0 * p + 0.5)));
-                         double sum = 0;
-                         for (int k = 0; k < ip.count; ++k) {
-                           if (!std::isfinite(ip.weight[k]) || ip.weight[k] < 0 || ip.index[k] < 0 || ip.index[k] >= 81) ++bad;
-                           sum += ip.weight[k];
-                         }
-                         worst_sum = std::max(worst_sum, std::abs(sum - 1));
-                         ++n;
-                       }
-                     return Outcome{bad == 0 && worst_sum <= 1e-12,
-                                    fmt::format("{} directions: {} bad weights, max |sum - 1| = {:.3g}", n, bad, worst_sum)};
-                   }});
+                   [](Path) { return BarycentricGrazing(); }});
   cases.push_back({"compress/huge-dynamic-range", "compress",
                    "values 1e-6..1e4, pca-view c=2 and lpca k=4 c=2, with and without --log: decoded values finite; "
                    "with the log transform the median relative error is below 10 % and below the one without",
-                   [](const std::filesystem::path&) {
-                     const Dataset d = HdrData();
-                     Outcome o{true, ""};
-                     for (CodecMethod m : {CodecMethod::kPcaView, CodecMethod::kLpca}) {
-                       double med[2];
-                       std::uint64_t bad = 0;
-                       for (int log = 0; log < 2; ++log) {
-                         CompressOptions co;
-                         co.method = m;
-                         co.components = 2;
-                         co.clusters = 4;
-                         co.log_transform = log;
-                         co.log_epsilon = 1e-7;  // below the smallest value, so the log resolves it
-                         const Dataset out = Compress(d, co).DecodeAll();
-                         for (float v : out.data()) bad += !std::isfinite(v);
-                         med[log] = bad ? std::numeric_limits<double>::infinity() : MedianRelativeError(d, out);
-                       }
-                       const bool ok = bad == 0 && med[1] < 0.1 && med[1] < med[0];
-                       o.passed = o.passed && ok;
-                       o.figure += fmt::format("{}{}: median relative error {:.3g} without log, {:.3g} with log, {} non-finite",
-                                               o.figure.empty() ? "" : "; ", MethodLabel(m, 2, 4), med[0], med[1], bad);
-                     }
-                     return o;
-                   }});
+                   [](Path) { return CompressHugeDynamicRange(); }});
   cases.push_back({"metrics/huge-dynamic-range", "metrics",
                    "reference 1e-6..1e4 against reference x (1 + 1e-3): rel L2 = 1e-3 within 1e-6, PSNR finite",
-                   [](const std::filesystem::path&) {
-                     const Dataset a = HdrData();
-                     Dataset b = a;
-                     for (auto& v : b.data()) v = float(double(v) * (1 + 1e-3));
-                     const auto s = Compare(*MemorySource(a), *MemorySource(b));
-                     const double rel = s.rel_l2.value_or(-1);
-                     return Outcome{std::abs(rel - 1e-3) <= 1e-6 && s.psnr_db && std::isfinite(*s.psnr_db) &&
-                                        s.mean_ssim && std::isfinite(*s.mean_ssim),
-                                    fmt::format("rel L2 {:.9g}, PSNR {:.3f} dB, SSIM {:.6f}", rel, s.psnr_db.value_or(0),
-                                                s.mean_ssim.value_or(0))};
-                   }});
+                   [](Path) { return MetricsHugeDynamicRange(); }});
   cases.push_back({"compress/rank-1", "compress",
                    "rank-1 data (texel x direction x channel factors): c = 1 and c = 8 reconstruct to rel L2 <= 1e-5",
-                   [](const std::filesystem::path&) {
-                     const Dataset d = MakeData(4, 6, 8, [](int v, int l, int y, int x, int c) {
-                       return (0.2 + 0.1 * std::sin(x + 2.0 * y)) * (1.0 + 0.5 * std::cos(v + 0.7 * l)) * (1 + 0.3 * c);
-                     });
-                     return RoundTripsWithin(d, 1e-5, {{CodecMethod::kPcaView, 1, 0}, {CodecMethod::kPcaView, 8, 0},
-                                                       {CodecMethod::kLpca, 1, 1}, {CodecMethod::kLpca, 8, 4}});
-                   }});
+                   [](Path) { return CompressRank1(); }});
   cases.push_back({"compress/constant", "compress",
                    "constant 0.37 and all-zero data: every codec reconstructs with rel L2 <= 1e-6, nothing non-finite",
-                   [](const std::filesystem::path&) {
-                     Outcome o{true, ""};
-                     for (double value : {0.37, 0.0}) {
-                       const Dataset d = MakeData(3, 5, 8, [value](int, int, int, int, int) { return value; });
-                       const Outcome r = RoundTripsWithin(d, 1e-6, {{CodecMethod::kPcaView, 4, 0}, {CodecMethod::kLpca, 4, 4}});
-                       o.passed = o.passed && r.passed;
-                       o.figure += fmt::format("{}value {:g}: {}", o.figure.empty() ? "" : "; ", value, r.figure);
-                     }
-                     return o;
-                   }});
+                   [](Path) { return CompressConstant(); }});
   cases.push_back({"compress/near-duplicate-texels", "compress",
                    "all texels equal up to 1e-7 relative noise, lpca k=8 and pca-view: rel L2 <= 1e-5, finite",
-                   [](const std::filesystem::path&) {
-                     const Dataset d = MakeData(3, 6, 12, [](int v, int l, int y, int x, int c) {
-                       return (0.3 + 0.2 * std::sin(v + 0.5 * l + c)) * (1 + 1e-7 * (Hash(v, l, y, x, c) - 0.5));
-                     });
-                     return RoundTripsWithin(d, 1e-5, {{CodecMethod::kPcaView, 2, 0}, {CodecMethod::kLpca, 2, 8}});
-                   }});
+                   [](Path) { return CompressNearDuplicateTexels(); }});
   cases.push_back({"compress/single-view-or-light", "compress",
                    "1 view x 6 lights and 5 views x 1 light, c = 32 (clamped to what the data allows, so lossless): "
                    "rel L2 <= 1e-5, finite",
-                   [](const std::filesystem::path&) {
-                     auto f = [](int v, int l, int y, int x, int c) { return 0.1 + 0.05 * Hash(v, l, y, x, c) + 0.02 * (v + l); };
-                     Outcome a = RoundTripsWithin(MakeData(1, 6, 6, f), 1e-5, {{CodecMethod::kPcaView, 32, 0}, {CodecMethod::kLpca, 32, 1}});
-                     Outcome b = RoundTripsWithin(MakeData(5, 1, 6, f), 1e-5, {{CodecMethod::kPcaView, 32, 0}, {CodecMethod::kLpca, 32, 1}});
-                     return Outcome{a.passed && b.passed, "1 view: " + a.figure + " | 1 light: " + b.figure};
-                   }});
+                   [](Path) { return CompressSingleViewOrLight(); }});
   cases.push_back({"compress/k-greater-than-texels", "compress",
                    "2x2 texels with lpca k = 32: clamped to 4 clusters with a warning, rel L2 <= 1e-5, finite",
-                   [](const std::filesystem::path&) {
-                     const Dataset d = MakeData(3, 4, 2, [](int v, int l, int y, int x, int c) { return 0.2 + Hash(v, l, y, x, c); });
-                     const RoundTrip r = Roundtrip(d, CodecMethod::kLpca, 2, 32);
-                     const double rel = r.errors.rel_l2.value_or(1e30);
-                     const bool ok = r.non_finite == 0 && r.summary.clusters == 4 && !r.summary.warnings.empty() && rel <= 1e-5;
-                     return Outcome{ok, fmt::format("stored clusters {}, {} warning(s), rel L2 {:.3g}, {} non-finite",
-                                                    r.summary.clusters, r.summary.warnings.size(), rel, r.non_finite)};
-                   }});
+                   [](Path) { return CompressMoreClustersThanTexels(); }});
   for (const char* bad : {"NaN", "Inf"}) {
     const std::string b = bad;
     cases.push_back({"input/" + b, "compress+metrics",
                      "a dataset holding one non-finite value is refused (bad input, message naming it) by compression "
                      "from memory and from a file, and by the metrics",
-                     [b](const std::filesystem::path& tmp) {
-                       Dataset d = MakeData(2, 3, 4, [](int v, int l, int y, int x, int c) { return 0.1 + Hash(v, l, y, x, c); });
-                       const Dataset clean = d;
-                       d.at(1, 2, 3, 0, 1) = b == "NaN" ? std::numeric_limits<float>::quiet_NaN() : std::numeric_limits<float>::infinity();
-                       const auto file = tmp / ("bad_" + b + ".h5");
-                       WriteDataset(file, d);
-                       std::string figure;
-                       bool ok = true;
-                       for (CodecMethod m : {CodecMethod::kPcaView, CodecMethod::kLpca}) {
-                         CompressOptions co;
-                         co.method = m;
-                         co.components = 2, co.clusters = 2;
-                         const Outcome a = ExpectRefused([&] { Compress(d, co); }, ExitCode::kBadInput, b == "NaN" ? "nan" : "inf");
-                         const Outcome f = ExpectRefused([&] { CompressFile(file, co); }, ExitCode::kBadInput, b == "NaN" ? "nan" : "inf");
-                         ok = ok && a.passed && f.passed;
-                         figure += fmt::format("{} memory: {}; file: {}; ", MethodName(m), a.figure, f.figure);
-                       }
-                       const Outcome mt = ExpectRefused([&] { Compare(*MemorySource(clean), *OpenSource(file)); },
-                                                        ExitCode::kBadInput, b);
-                       return Outcome{ok && mt.passed, figure + "metrics: " + mt.figure};
-                     }});
+                     [b](Path tmp) { return NonFiniteInputRefused(b, tmp); }});
   }
   cases.push_back({"render/huge-dynamic-range", "render",
                    "cylinder under the sky environment with the 1e-6..1e4 BTF: every pixel finite and >= 0",
-                   [](const std::filesystem::path&) {
-                     const Dataset d = HdrData();
-                     RenderOptions ro;
-                     ro.scene = "cylinder";
-                     ro.lighting = "environment";
-                     ro.width = 48, ro.height = 40;
-                     const Image img = Render(*DatasetEvaluator(d), ro);
-                     int bad = 0;
-                     double mx = 0;
-                     for (float v : img.pixels) {
-                       if (!std::isfinite(v) || v < 0) ++bad;
-                       else mx = std::max(mx, double(v));
-                     }
-                     return Outcome{bad == 0, fmt::format("{} pixels values, {} non-finite or negative, max {:.4g}",
-                                                          img.pixels.size(), bad, mx)};
-                   }});
+                   [](Path) { return RenderHugeDynamicRange(); }});
   return cases;
 }
 
@@ -424,9 +454,17 @@ nlohmann::json StabilitySummary::ToJson() const {
   j["cases"] = nlohmann::json::array();
   for (const auto& c : cases)
     j["cases"].push_back({{"name", c.name}, {"stage", c.stage}, {"criterion", c.criterion}, {"passed", c.passed},
-                          {"figure", c.figure}, {"seconds", c.seconds}});
+                          {"figure", c.figure}, {"seconds", {{"total", c.seconds}}}});
   j["seconds"] = times.ToJson();
   return j;
+}
+
+std::string StabilitySummary::Report() const {
+  std::string r;
+  for (const auto& c : cases)
+    r += fmt::format("{} {:<34} {:>6.2f} s  {}\n     criterion: {}\n", c.passed ? "PASS" : "FAIL", c.name, c.seconds,
+                     c.figure, c.criterion);
+  return r + fmt::format("{} passed, {} failed ({})\n", passed, failed, times.Report());
 }
 
 std::vector<std::string> StabilityCaseNames() {

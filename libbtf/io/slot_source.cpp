@@ -1,13 +1,11 @@
-#include "libbtf/eval/source.h"
+#include "libbtf/io/slot_source.h"
 
 #include <algorithm>
 #include <cmath>
 #include <vector>
 
 #include "libbtf/core/error.h"
-#include "libbtf/eval/codec_source.h"
 #include "libbtf/io/dataset_io.h"
-#include "libbtf/io/file_kind.h"
 
 namespace btf {
 
@@ -84,11 +82,8 @@ std::unique_ptr<SlotSource> MemorySource(const Dataset& dataset, std::string nam
   return std::make_unique<MemorySlotSource>(dataset, std::move(name));
 }
 
-std::unique_ptr<SlotSource> OpenSource(const std::filesystem::path& path) {
-  const std::string format = FileFormatOf(path);
-  if (format == kDatasetFormat) return std::make_unique<FileSlotSource>(path);
-  if (format == "libbtf-codec") return OpenCodecSource(path);
-  ThrowBadInput("'{}' holds format '{}'; btf-eval reads libbtf datasets and codecs only", path.string(), format);
+std::unique_ptr<SlotSource> OpenDatasetSource(const std::filesystem::path& path) {
+  return std::make_unique<FileSlotSource>(path);
 }
 
 void CheckCompatible(const SlotSource& ref, const SlotSource& test) {
@@ -107,9 +102,9 @@ void CheckFiniteSlot(const SlotSource& source, int view, const float* slot) {
     const std::size_t x = (i / source.channels()) % source.width();
     const std::size_t y = (i / (std::size_t(source.channels()) * source.width())) % source.height();
     const std::size_t l = i / source.image_size();
-    ThrowBadInput("'{}': view {} light {} texel (y {}, x {}) channel {} is {}; values must be finite: "
-                  "fix or regenerate this input",
-                  source.name(), view, l, y, x, c, std::isnan(slot[i]) ? "NaN" : "Inf");
+    ThrowBadInput("'{}' holds {} at view {}, light {}, texel (y {}, x {}), channel {}: values must be finite; fix or "
+                  "regenerate this input",
+                  source.name(), std::isnan(slot[i]) ? "NaN" : "Inf", view, l, y, x, c);
   }
 }
 

@@ -32,6 +32,7 @@ struct StabilitySummary {
   int passed = 0, failed = 0;
   PhaseTimes times;
   nlohmann::json ToJson() const;
+  std::string Report() const;  // one block per case, then the counts
 };
 
 // Runs the suite. A case that throws where it must not is a failed case (the message is its

@@ -1,4 +1,4 @@
-#include "libbtf/eval/stability.h"
+#include "libbtf/stability/stability.h"
 
 #include <gtest/gtest.h>
 

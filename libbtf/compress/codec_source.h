@@ -1,0 +1,19 @@
+#pragma once
+// Codecs seen as view-slot sources (libbtf/io/slot_source.h), and the one entry point that opens
+// any libbtf BTF file as a source.
+#include <filesystem>
+#include <memory>
+
+#include "libbtf/compress/codec.h"
+#include "libbtf/io/slot_source.h"
+
+namespace btf {
+
+// A codec file, decoded one view slot at a time (Codec::DecodeViewSlot).
+std::unique_ptr<SlotSource> OpenCodecSource(const std::filesystem::path& path);
+
+// Opens a dataset or codec file, chosen by its "format" attribute (FileFormatOf). Other libbtf
+// formats and foreign files throw btf::Error (bad input) naming the file.
+std::unique_ptr<SlotSource> OpenSource(const std::filesystem::path& path);
+
+}  // namespace btf

@@ -1,0 +1,7 @@
+#include "libbtf/core/version.h"
+
+namespace btf {
+
+std::string Version() { return BTF_VERSION; }
+
+}  // namespace btf
