@@ -139,13 +139,14 @@ int main(int argc, char** argv) {
       if (common.json) {
         btf::cli::PrintJson(s.ToJson());
       } else {
-        fmt::print("{:<22} {:>10} {:>7} {:>11} {:>11} {:>11} {:>9}\n", "setting", "bytes", "ratio", "compress s",
-                   "decode s", s.error_metric, "Pareto");
+        fmt::print("{:<22} {:>10} {:>7} {:>11} {:>11} {:>11} {:>8} {:>9}\n", "setting", "bytes", "ratio", "compress s",
+                   "decode s", s.error_metric, "PSNR dB", "Pareto");
         for (const auto& p : s.points)
-          fmt::print("{:<22} {:>10} {:>7.1f} {:>11.4g} {:>11.4g} {:>11.4g} {:>9}\n",
+          fmt::print("{:<22} {:>10} {:>7.1f} {:>11.4g} {:>11.4g} {:>11.4g} {:>8} {:>9}\n",
                      p.method == "lpca" ? fmt::format("lpca k={} c={}", p.clusters, p.components)
                                         : fmt::format("{} c={}", p.method, p.components),
                      p.bytes, p.ratio_float32, p.compress_s, p.decode_s, p.error,
+                     p.psnr_db ? fmt::format("{:.2f}", *p.psnr_db) : "inf",
                      std::string(p.pareto_bytes ? "B" : "") + (p.pareto_compress ? "C" : "") + (p.pareto_decode ? "D" : ""));
         fmt::print("report: {}\n", s.report);
       }
