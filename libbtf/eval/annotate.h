@@ -13,8 +13,8 @@
 namespace btf {
 
 // The font file text is drawn with: $BTF_FONT if set (empty when that file does not exist), else
-// the first existing of /usr/share/fonts/truetype/dejavu/DejaVuSans.ttf (fonts-dejavu-core) and
-// /usr/share/fonts/TTF/DejaVuSans.ttf; empty when there is none.
+// DejaVuSans.ttf where the Debian package fonts-dejavu-core (or another distribution's DejaVu
+// package) installs it; empty when there is none (docs/btf-eval.md, "Text in pictures").
 std::string LabelFont();
 
 // Draws UTF-8 `text` with its top-left corner at (x, y), about `size` pixels high, in colour
