@@ -2,11 +2,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numeric>
+#include <vector>
 
 #include "libbtf/core/error.h"
 #include "libbtf/core/error_stats.h"
-#include "libbtf/eval/plot.h"
+#include "libbtf/eval/annotate.h"
 
 namespace btf {
 
@@ -94,22 +96,8 @@ double MeanSsim(const float* ref, const float* test, int h, int w, int c, double
   return total / c;
 }
 
-void FalseColour(double t, float* rgb) {
-  // Viridis-like stops (sRGB), interpolated in sRGB and returned linear.
-  static const Colour kStops[] = {Colour::Hex("#440154"), Colour::Hex("#3b528b"), Colour::Hex("#21918c"),
-                                  Colour::Hex("#5ec962"), Colour::Hex("#fde725")};
-  t = std::isfinite(t) ? std::clamp(t, 0.0, 1.0) : 1.0;
-  const double f = t * 4;
-  const int i = std::min(int(f), 3);
-  const double u = f - i;
-  const Colour a = kStops[i], b = kStops[i + 1];
-  rgb[0] = SrgbToLinear(float(a.r + (b.r - a.r) * u));
-  rgb[1] = SrgbToLinear(float(a.g + (b.g - a.g) * u));
-  rgb[2] = SrgbToLinear(float(a.b + (b.b - a.b) * u));
-}
-
 Image ErrorMapImage(const float* ref, const float* test, int h, int w, int c, double scale, int min_size) {
-  Image map(w, h, 3);
+  std::vector<float> rms(std::size_t(w) * h);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       double s = 0;
@@ -118,28 +106,26 @@ Image ErrorMapImage(const float* ref, const float* test, int h, int w, int c, do
         const double d = double(test[i]) - double(ref[i]);
         s += d * d;
       }
-      const double e = std::sqrt(s / c);
-      FalseColour(scale > 0 ? e / scale : 0.0, &map.at(x, y, 0));
+      rms[std::size_t(y) * w + x] = float(std::sqrt(s / c));
     }
   const int zoom = std::max(1, (min_size + std::max(w, h) - 1) / std::max(w, h));
-  const int mw = w * zoom, mh = h * zoom;
-  const int width = std::max(mw, 220) + 16, height = mh + 50;
-  Canvas canvas(width, height, Colour{1, 1, 1});
-  canvas.Blit(map, 8, 8, zoom);
-  // Colour bar with its scale, so the map can be read without the JSON.
-  const int bar_w = width - 16;
-  for (int x = 0; x < bar_w; ++x) {
-    float rgb[3];
-    FalseColour(double(x) / (bar_w - 1), rgb);
-    Image px(1, 1, 3);
-    std::copy_n(rgb, 3, px.pixels.begin());
-    for (int y = 0; y < 10; ++y) canvas.Blit(px, 8 + x, mh + 14 + y);
-  }
-  const Colour black{0, 0, 0};
-  canvas.Text(8, mh + 30, "0", black);
+  const int mw = w * zoom, mh = h * zoom, pad = 8, bar_h = 12, text_size = 13;
+  const int width = std::max(mw, 240) + 2 * pad, height = pad + mh + 6 + bar_h + 4 + text_size + 6;
+  Image picture = Filled(width, height, {1, 1, 1});
+  Paste(picture, FalseColorImage(rms.data(), w, h, scale), pad, pad, zoom);
+  // Colour bar with its scale, so the map can be read without the JSON (the numbers need a font:
+  // without one, see LabelFont, the bar is left unlabelled).
+  const int bar_w = width - 2 * pad;
+  std::vector<float> ramp(std::size_t(bar_w) * bar_h);
+  for (std::size_t i = 0; i < ramp.size(); ++i) ramp[i] = float(double(i % bar_w) / (bar_w - 1));
+  const int bar_y = pad + mh + 6;
+  Paste(picture, FalseColorImage(ramp.data(), bar_w, bar_h, 1.0), pad, bar_y);
+  // Text is drawn on display values, so its anti-aliased edges look as the font intends.
+  picture = ToDisplay(picture);
   const std::string hi = fmt::format("{:.3g} (RMS over channels)", scale);
-  canvas.Text(width - 8 - Canvas::TextWidth(hi), mh + 30, hi, black);
-  return canvas.image();
+  DrawText(picture, pad, bar_y + bar_h + 4, "0", text_size, {0, 0, 0});
+  DrawText(picture, width - pad - TextWidth(hi, text_size), bar_y + bar_h + 4, hi, text_size, {0, 0, 0});
+  return ToLinear(picture);
 }
 
 double CompareSummary::Metric(const std::string& metric) const {

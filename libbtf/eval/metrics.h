@@ -75,13 +75,12 @@ CompareSummary Compare(const CompareOptions& options, const SlotSource& referenc
 double MeanSsim(const float* reference, const float* test, int height, int width, int channels, double peak,
                 double sigma = 1.5);
 
-// False-colour error map of one image pair: per-texel RMS over channels, 0 -> dark blue, `scale`
-// -> yellow, upscaled by an integer factor to at least `min_size` pixels, with a labelled colour
-// bar. Pixel values are display (sRGB-encoded) values for WriteImage with srgb = true.
+// False-colour error map of one image pair: per-texel RMS over channels through the "viridis"
+// map (FalseColorImage: dark blue 0, yellow `scale`), upscaled by an integer factor to at least
+// `min_size` pixels, with a colour bar labelled 0 and `scale` (DejaVu Sans through OpenImageIO;
+// without a font, see LabelFont, the bar has no numbers). Returns linear values: write them with
+// srgb = true.
 Image ErrorMapImage(const float* reference, const float* test, int height, int width, int channels, double scale,
                     int min_size = 256);
-
-// A perceptually ordered false-colour ramp (t in [0, 1]) as linear RGB.
-void FalseColour(double t, float* rgb);
 
 }  // namespace btf

@@ -1,14 +1,14 @@
 #include "libbtf/eval/render.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <vector>
 
 #include <Eigen/Geometry>
 
 #include "libbtf/core/error.h"
-#include "libbtf/eval/metrics.h"
-#include "libbtf/eval/plot.h"
+#include "libbtf/eval/annotate.h"
 
 namespace btf {
 
@@ -244,7 +244,8 @@ Image ComparisonPanel(const Image& truth, const Image& test, const std::string& 
   std::sort(lum.begin(), lum.end());
   const double level = std::max(lum[std::size_t(0.99 * (lum.size() - 1))], 1e-12);
   const double exposure = 0.8 / level;
-  Image a(W, H, 3), b(W, H, 3), d(W, H, 3);
+  Image a(W, H, 3), b(W, H, 3);
+  std::vector<float> rel(std::size_t(W) * H);
   double worst = 0, sum = 0;
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
@@ -252,24 +253,24 @@ Image ComparisonPanel(const Image& truth, const Image& test, const std::string& 
         a.at(x, y, k) = float(std::min(1.0, truth.at(x, y, k) * exposure));
         b.at(x, y, k) = float(std::min(1.0, test.at(x, y, k) * exposure));
       }
-      const double rel = std::abs(Luminance(test, x, y) - Luminance(truth, x, y)) / level;
-      worst = std::max(worst, rel);
-      sum += rel;
-      FalseColour(rel / diff_full_scale, &d.at(x, y, 0));
+      const double r = std::abs(Luminance(test, x, y) - Luminance(truth, x, y)) / level;
+      worst = std::max(worst, r);
+      sum += r;
+      rel[std::size_t(y) * W + x] = float(r);
     }
-  if (stats) *stats = {worst, sum / (double(W) * H)};
-  const int gap = 8, label_h = 18;
-  Canvas canvas(3 * W + 4 * gap, H + 2 * label_h + gap, Colour{1, 1, 1});
-  const Colour black{0, 0, 0};
+  const Image d = FalseColorImage(rel.data(), W, H, diff_full_scale);
+  const int gap = 8, label_h = 22, text_size = 14;
+  Image panel = Filled(3 * W + 4 * gap, H + label_h + gap, {1, 1, 1});
   const std::string labels[3] = {truth_label, test_label,
                                  fmt::format("|diff| 0..{:g}% (max {:.2g}%)", 100 * diff_full_scale, 100 * worst)};
   const Image* images[3] = {&a, &b, &d};
-  for (int i = 0; i < 3; ++i) {
-    const int x0 = gap + i * (W + gap);
-    canvas.Text(x0, 5, labels[i], black);
-    canvas.Blit(*images[i], x0, label_h);
-  }
-  return canvas.image();
+  for (int i = 0; i < 3; ++i) Paste(panel, *images[i], gap + i * (W + gap), label_h);
+  // Labels on display values (anti-aliased as the font intends); none without a font.
+  panel = ToDisplay(panel);
+  bool labelled = true;
+  for (int i = 0; i < 3; ++i) labelled &= DrawText(panel, gap + i * (W + gap), 4, labels[i], text_size, {0, 0, 0});
+  if (stats) *stats = {worst, sum / (double(W) * H), labelled};
+  return ToLinear(panel);
 }
 
 }  // namespace btf

@@ -64,12 +64,14 @@ Image Render(const BtfEvaluator& btf, const RenderOptions& options);
 void EnvironmentRadiance(const std::string& environment, const Vec3& d, double* rgb);
 
 // Side-by-side panel: ground truth | test | difference, tone-mapped with one exposure (ground
-// truth's 99th-percentile luminance -> 0.8) and labelled. The difference is |test - truth|
-// (luminance) relative to that same level, false colour from 0 to `diff_full_scale` (default 10 %).
-// Returns a linear image to write with srgb = true; `stats` (if non-null) gets the largest and the
-// mean relative difference over all pixels.
+// truth's 99th-percentile luminance -> 0.8) and labelled above each image (DrawText; without a
+// font, see LabelFont, the panel has no text and `stats->labelled` is false). The difference is
+// |test - truth| (luminance) relative to that same level, in the "viridis" map (FalseColorImage)
+// from 0 to `diff_full_scale` (default 10 %). Returns a linear image to write with srgb = true;
+// `stats` (if non-null) gets the largest and the mean relative difference over all pixels.
 struct PanelStats {
   double max_rel_diff = 0, mean_rel_diff = 0;
+  bool labelled = false;  // the labels were drawn
 };
 Image ComparisonPanel(const Image& truth, const Image& test, const std::string& truth_label,
                       const std::string& test_label, double diff_full_scale = 0.1, PanelStats* stats = nullptr);

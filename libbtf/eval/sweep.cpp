@@ -4,7 +4,6 @@
 #include <cmath>
 #include <fstream>
 #include <map>
-#include <set>
 #include <sstream>
 
 #include "libbtf/compress/codec.h"
@@ -69,18 +68,6 @@ std::string ReadBytes(const std::filesystem::path& p) {
   return ss.str();
 }
 
-std::string Html(const std::string& s) {
-  std::string out;
-  for (char ch : s) {
-    if (ch == '<') out += "&lt;";
-    else if (ch == '>') out += "&gt;";
-    else if (ch == '&') out += "&amp;";
-    else if (ch == '"') out += "&quot;";
-    else out += ch;
-  }
-  return out;
-}
-
 std::string PointName(const SweepPoint& p) {
   return p.method == "lpca" ? fmt::format("lpca_k{}_c{}", p.clusters, p.components)
                             : fmt::format("{}_c{}", p.method, p.components);
@@ -92,6 +79,169 @@ void WritePng(const std::filesystem::path& path, const Image& image) {
   wo.format = PixelFormat::kUint8;
   wo.srgb = true;
   WriteImage(path, image, wo);
+}
+
+// ---- Phase 1: read and check the dataset, describe it. ----
+
+// The dataset in memory; NaN/Inf refused up front with the item named (Compress would too, but
+// only for the first method).
+Dataset ReadChecked(const std::filesystem::path& path) {
+  Dataset data = ReadDataset(path);
+  const auto source = MemorySource(data, path.string());
+  for (int v = 0; v < data.num_views(); ++v) CheckFiniteSlot(*source, v, data.view_slot(v).data());
+  return data;
+}
+
+SweepSummary Describe(const std::filesystem::path& dataset, const std::filesystem::path& dir, const Dataset& data,
+                      const SweepOptions& o) {
+  SweepSummary s;
+  s.dataset = dataset.string();
+  s.output_dir = dir.string();
+  s.error_metric = o.error_metric;
+  s.views = data.num_views(), s.lights = data.num_lights(), s.height = data.height(), s.width = data.width();
+  s.channels = data.channels();
+  s.raw_float32_bytes = std::uint64_t(data.size()) * 4;
+  return s;
+}
+
+// The settings, in a fixed order: each method, each k (lpca), each c.
+std::vector<SweepPoint> Settings(const SweepOptions& o) {
+  std::vector<SweepPoint> todo;
+  for (const auto& m : o.methods) {
+    const std::vector<int> ks = m == "lpca" ? o.clusters : std::vector<int>{0};
+    for (int k : ks)
+      for (int c : o.components) {
+        SweepPoint p;
+        p.method = m, p.components = c, p.clusters = k;
+        todo.push_back(p);
+      }
+  }
+  return todo;
+}
+
+// ---- Phase 2: compress and time one setting. ----
+
+// Compresses `runs` times and decodes `runs` times, filling the point's times, sizes, stored
+// parameters and warnings; returns the codec and sets `decoded` to its decoded BTF.
+Codec CompressAndTime(const Dataset& data, const SweepOptions& o, SweepPoint& p, Dataset& decoded) {
+  CompressOptions opt;
+  opt.method = ParseMethod(p.method);
+  opt.components = p.components;
+  if (p.clusters) opt.clusters = p.clusters;
+  opt.seed = o.seed;
+  opt.log_transform = o.log_transform;
+  Codec codec;
+  CompressSummary cs;
+  for (int r = 0; r < o.runs; ++r) {
+    Timer t;
+    cs = Compress(opt, *MemorySource(data), &codec);
+    p.compress_runs.push_back(t.Seconds());
+  }
+  p.warnings = cs.warnings;
+  p.stored_components = cs.components;
+  p.stored_clusters = cs.clusters;
+  p.bytes = codec.StoredBytes();
+  p.ratio_float32 = p.bytes ? double(codec.RawBytes(4)) / double(p.bytes) : 0;
+  p.ratio_half = p.bytes ? double(codec.RawBytes(2)) / double(p.bytes) : 0;
+  // Decoding small codecs takes microseconds: each run repeats it until it has taken at least
+  // 20 ms and reports the time per decode, so scheduler noise does not dominate.
+  for (int r = 0; r < o.runs; ++r) {
+    Timer t;
+    int n = 0;
+    do {
+      decoded = codec.DecodeAll();
+      ++n;
+    } while (t.Seconds() < 0.02);
+    p.decode_runs.push_back(t.Seconds() / n);
+  }
+  p.compress_s = Median(p.compress_runs);
+  p.decode_s = Median(p.decode_runs);
+  return codec;
+}
+
+// ---- Phase 3: evaluate one setting (metrics against the dataset). Returns the PSNR peak. ----
+
+double Evaluate(const SlotSource& truth, const Dataset& decoded, const SweepOptions& o, SweepPoint& p) {
+  CompareOptions co;
+  co.ssim = o.ssim;
+  const CompareSummary e = Compare(co, truth, *MemorySource(decoded, PointName(p)));
+  p.rmse = e.rmse, p.max_abs = e.max_abs, p.rel_l2 = e.rel_l2, p.psnr_db = e.psnr_db, p.mean_ssim = e.mean_ssim;
+  p.error = o.error_metric == "rel" && e.rel_l2 ? *e.rel_l2 : e.rmse;
+  return e.peak;
+}
+
+void KeepCodec(const std::filesystem::path& dir, const Codec& codec, SweepPoint& p) {
+  const auto file = dir / "codecs" / (PointName(p) + ".h5");
+  WriteCodec(file, codec, "btf-eval sweep");
+  p.codec_file = file.string();
+  p.file_bytes = std::filesystem::file_size(file);
+}
+
+// The codec each method renders (see SweepOptions::render_max_rel_error), with its point index.
+class RenderChoice {
+ public:
+  struct Chosen {
+    std::size_t index;
+    bool within;  // meets the error bound
+    Codec codec;
+  };
+  explicit RenderChoice(double max_rel_error) : max_rel_error_(max_rel_error) {}
+  // Offers point `index` of `points` (already measured) and its codec.
+  void Offer(const std::vector<SweepPoint>& points, std::size_t index, Codec&& codec) {
+    const SweepPoint& p = points[index];
+    const bool within = p.rel_l2 && *p.rel_l2 <= max_rel_error_;
+    auto it = chosen_.find(p.method);
+    bool take = it == chosen_.end();
+    if (!take) {
+      const SweepPoint& q = points[it->second.index];
+      take = within ? (!it->second.within || p.bytes < q.bytes) : (!it->second.within && p.error < q.error);
+    }
+    if (take) chosen_.insert_or_assign(p.method, Chosen{index, within, std::move(codec)});
+  }
+  const Chosen* Find(const std::string& method) const {
+    const auto it = chosen_.find(method);
+    return it == chosen_.end() ? nullptr : &it->second;
+  }
+
+ private:
+  double max_rel_error_;
+  std::map<std::string, Chosen> chosen_;
+};
+
+// Phases 2 and 3 for every setting, in order; codecs kept (files) and offered for rendering.
+std::vector<SweepPoint> MeasureSettings(const Dataset& data, const SlotSource& truth, const SweepOptions& o,
+                                        const std::filesystem::path& dir, const Reporter& reporter,
+                                        RenderChoice& choice, double* psnr_peak) {
+  const std::vector<SweepPoint> todo = Settings(o);
+  std::vector<SweepPoint> points;
+  for (std::size_t i = 0; i < todo.size(); ++i) {
+    reporter.Progress(i, todo.size(), "sweep");
+    SweepPoint p = todo[i];
+    Dataset decoded;
+    Codec codec = CompressAndTime(data, o, p, decoded);
+    for (const auto& w : p.warnings) reporter.Warn("{}: {}", PointName(p), w);
+    *psnr_peak = Evaluate(truth, decoded, o, p);
+    if (o.keep_codecs) KeepCodec(dir, codec, p);
+    reporter.Info("{}: {} bytes (ratio {:.1f}), compress {:.4g} s, decode {:.4g} s, {} {:.5g}", PointName(p), p.bytes,
+                  p.ratio_float32, p.compress_s, p.decode_s, o.error_metric, p.error);
+    points.push_back(std::move(p));
+    if (o.render) choice.Offer(points, points.size() - 1, std::move(codec));
+  }
+  reporter.Progress(todo.size(), todo.size(), "sweep");
+  return points;
+}
+
+// ---- Phase 4: Pareto fronts and plots. ----
+
+void MarkParetoFronts(std::vector<SweepPoint>& points, std::vector<int>* fb, std::vector<int>* fc,
+                      std::vector<int>* fd) {
+  std::vector<double> err, bytes, ct, dt;
+  for (const auto& p : points)
+    err.push_back(p.error), bytes.push_back(double(p.bytes)), ct.push_back(p.compress_s), dt.push_back(p.decode_s);
+  *fb = ParetoFront(bytes, err), *fc = ParetoFront(ct, err), *fd = ParetoFront(dt, err);
+  for (int i : *fb) points[i].pareto_bytes = true;
+  for (int i : *fc) points[i].pareto_compress = true;
+  for (int i : *fd) points[i].pareto_decode = true;
 }
 
 // One plot of error against a cost, one series per (method, k), Pareto front marked.
@@ -111,7 +261,7 @@ Plot CostPlot(const std::vector<SweepPoint>& points, const std::string& title, c
       series_of[key] = int(plot.series.size());
       PlotSeries s;
       s.name = key;
-      s.colour = SeriesColour(int(plot.series.size()));
+      s.color = SeriesColor(int(plot.series.size()));
       s.shape = int(plot.series.size());
       s.line = join;
       plot.series.push_back(s);
@@ -123,7 +273,7 @@ Plot CostPlot(const std::vector<SweepPoint>& points, const std::string& title, c
   }
   PlotSeries pf;
   pf.name = "Pareto front";
-  pf.colour = Colour{0, 0, 0};
+  pf.color = Color{0, 0, 0};
   pf.line = true;
   pf.ring_markers = true;
   for (int i : front) pf.x.push_back(cost(points[i])), pf.y.push_back(points[i].error);
@@ -131,38 +281,111 @@ Plot CostPlot(const std::vector<SweepPoint>& points, const std::string& title, c
   return plot;
 }
 
-std::string ReportHtml(const SweepSummary& s, const SweepOptions& o, const std::filesystem::path& dir,
-                       const std::vector<std::string>& plot_names) {
-  std::string h;
-  h += "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n";
-  h += "<title>libbtf codec sweep: " + Html(s.dataset) + "</title>\n";
-  h += "<style>body{font-family:sans-serif;margin:24px;max-width:1500px;color:#222}"
-       "table{border-collapse:collapse;font-size:13px}td,th{border:1px solid #bbb;padding:3px 7px;text-align:right}"
-       "th{background:#eee}td.l{text-align:left}tr.front td{background:#fff6d5}"
-       ".plots{display:flex;flex-wrap:wrap;gap:8px}.plots img{border:1px solid #ccc;width:calc(50% - 10px);min-width:480px}.renders img{margin:6px 0;max-width:100%}"
-       "code{background:#f3f3f3;padding:1px 4px}</style></head><body>\n";
-  h += "<h1>Codec sweep: error against size and run time</h1>\n";
-  h += fmt::format(
+std::vector<std::pair<std::string, Plot>> MakePlots(std::vector<SweepPoint>& points, const std::string& metric) {
+  std::vector<int> fb, fc, fd;
+  MarkParetoFronts(points, &fb, &fc, &fd);
+  const std::string y = metric == "rel" ? "relative L2 error" : "RMSE";
+  return {{"error_vs_bytes", CostPlot(points, y + " vs stored bytes", "stored bytes", y, nullptr, &SweepPoint::bytes, fb, true)},
+          {"error_vs_compress_time", CostPlot(points, y + " vs compression time", "compression time (s, median)", y,
+                                              &SweepPoint::compress_s, nullptr, fc, false)},
+          {"error_vs_decode_time", CostPlot(points, y + " vs decoding time", "decoding time (s, median)", y,
+                                            &SweepPoint::decode_s, nullptr, fd, false)}};
+}
+
+void WritePlots(const std::filesystem::path& dir, const std::vector<std::pair<std::string, Plot>>& plots,
+                std::vector<std::string>& files) {
+  for (const auto& [name, plot] : plots) {
+    WriteTextFileAtomic(dir / (name + ".svg"), PlotSvg(plot));
+    files.push_back((dir / (name + ".svg")).string());
+  }
+}
+
+// ---- Phase 5: rendered comparisons, ground truth (the dataset) against each method's choice. ----
+
+std::vector<SweepRender> RenderComparisons(const Dataset& data, const std::vector<SweepPoint>& points,
+                                           const RenderChoice& choice, const SweepOptions& o,
+                                           const std::filesystem::path& dir, const Reporter& reporter,
+                                           std::vector<std::string>& files) {
+  std::vector<SweepRender> renders;
+  const auto gt = DatasetEvaluator(data);
+  bool warned = false;
+  const std::pair<const char*, const char*> panels[] = {{"patch", "point"}, {"cylinder", "environment"}};
+  for (const auto& [scene, lighting] : panels) {
+    RenderOptions ro = o.render_options;
+    ro.scene = scene;
+    ro.lighting = lighting;
+    const Image truth_img = Render(*gt, ro);
+    for (const auto& m : o.methods) {
+      const RenderChoice::Chosen* chosen = choice.Find(m);
+      if (!chosen) continue;
+      const std::string label = PointName(points[chosen->index]);
+      const Image test_img = Render(*CodecEvaluator(chosen->codec), ro);
+      SweepRender r;
+      r.method = m, r.label = label, r.scene = scene, r.lighting = lighting;
+      PanelStats ps;
+      const Image panel = ComparisonPanel(truth_img, test_img, "ground truth", "decoded " + label, 0.1, &ps);
+      if (!ps.labelled && !warned) {
+        reporter.Warn("no font for the labels of the rendered comparisons (install fonts-dejavu-core or set "
+                      "BTF_FONT): the PNG panels are written without text");
+        warned = true;
+      }
+      r.max_rel_diff = ps.max_rel_diff;
+      r.mean_rel_diff = ps.mean_rel_diff;
+      r.file = (dir / fmt::format("render_{}_{}_{}.png", m, scene, lighting)).string();
+      WritePng(r.file, panel);
+      files.push_back(r.file);
+      renders.push_back(r);
+    }
+  }
+  return renders;
+}
+
+// ---- Phase 6: the HTML report, one function per section. ----
+
+std::string ReportHead(const SweepSummary& s) {
+  return "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n<title>libbtf codec sweep: " +
+         EscapeXml(s.dataset) +
+         "</title>\n<style>body{font-family:sans-serif;margin:24px;max-width:1500px;color:#222}"
+         "table{border-collapse:collapse;font-size:13px}td,th{border:1px solid #bbb;padding:3px 7px;text-align:right}"
+         "th{background:#eee}td.l{text-align:left}tr.front td{background:#fff6d5}"
+         ".plots{display:flex;flex-wrap:wrap;gap:12px}"
+         "figure{margin:0 0 14px 0;border:1px solid #ccc;padding:6px;background:#fff}"
+         "figure.plot{flex:0 1 540px;box-sizing:border-box}figure svg{display:block;width:100%;height:auto}"
+         "figure.render{width:fit-content}"
+         "figure img{display:block;max-width:100%}figcaption{font-size:13px;margin-top:4px;line-height:1.5}"
+         ".key{font-size:15px}code{background:#f3f3f3;padding:1px 4px}</style></head><body>\n"
+         "<h1>Codec sweep: error against size and run time</h1>\n";
+}
+
+std::string ReportIntro(const SweepSummary& s, const SweepOptions& o) {
+  std::string h = fmt::format(
       "<p>Dataset <code>{}</code>: {} views &times; {} lights &times; {}&times;{} texels &times; {} channels, "
       "{:.3f} MB as float32. {} settings, each timed over {} run(s) (median). Error metric on the plots: "
       "<b>{}</b>. PSNR peak: {:.6g} (the reference's maximum value).</p>\n",
-      Html(s.dataset), s.views, s.lights, s.width, s.height, s.channels, s.raw_float32_bytes / 1e6, s.points.size(),
-      o.runs, s.error_metric == "rel" ? "relative L2 error ||decoded - truth|| / ||truth||" : "RMSE",
-      s.psnr_peak);
-  if (!o.command_line.empty()) h += "<p>Made by <code>" + Html(o.command_line) + "</code></p>\n";
-  h += "<h2>Plots</h2>\n<p>On the size plot, lines join the settings of one method (and cluster count) in order of c; black rings "
-       "and the black line "
-       "mark the Pareto front (no other setting is both cheaper and more accurate). Both axes are logarithmic.</p>\n"
-       "<div class=\"plots\">\n";
-  for (const auto& name : plot_names)
-    h += "<img alt=\"" + name + "\" src=\"data:image/svg+xml;base64," + Base64(ReadBytes(dir / (name + ".svg"))) +
-         "\">\n";
-  h += "</div>\n<h2>Results</h2>\n<p>bytes = stored coefficient arrays (Codec::StoredBytes); ratio = float32 raw size "
-       "/ bytes; times in seconds (median); &#9733; = on the Pareto front of error against bytes (B), compression "
-       "time (C) or decoding time (D).</p>\n";
-  h += "<table><tr><th>method</th><th>k</th><th>c</th><th>stored k/c</th><th>bytes</th><th>ratio</th>"
-       "<th>compress s</th><th>decode s</th><th>RMSE</th><th>rel L2</th><th>PSNR dB</th><th>SSIM</th>"
-       "<th>max abs</th><th>Pareto</th></tr>\n";
+      EscapeXml(s.dataset), s.views, s.lights, s.width, s.height, s.channels, s.raw_float32_bytes / 1e6,
+      s.points.size(), o.runs,
+      s.error_metric == "rel" ? "relative L2 error ||decoded - truth|| / ||truth||" : "RMSE", s.psnr_peak);
+  if (!o.command_line.empty()) h += "<p>Made by <code>" + EscapeXml(o.command_line) + "</code></p>\n";
+  return h;
+}
+
+std::string ReportPlots(const std::vector<std::pair<std::string, Plot>>& plots) {
+  std::string h =
+      "<h2>Plots</h2>\n<p>Labels cN next to the markers give the components c. On the size plot, lines join the "
+      "settings of one method (and cluster count) in order of c; black rings and the black line mark the Pareto "
+      "front (no other setting is both cheaper and more accurate).</p>\n<div class=\"plots\">\n";
+  for (const auto& [name, plot] : plots) h += PlotFigureHtml(plot);
+  return h + "</div>\n";
+}
+
+std::string ReportTable(const SweepSummary& s) {
+  std::string h =
+      "<h2>Results</h2>\n<p>bytes = stored coefficient arrays (Codec::StoredBytes); ratio = float32 raw size "
+      "/ bytes; times in seconds (median); &#9733; = on the Pareto front of error against bytes (B), compression "
+      "time (C) or decoding time (D).</p>\n"
+      "<table><tr><th>method</th><th>k</th><th>c</th><th>stored k/c</th><th>bytes</th><th>ratio</th>"
+      "<th>compress s</th><th>decode s</th><th>RMSE</th><th>rel L2</th><th>PSNR dB</th><th>SSIM</th>"
+      "<th>max abs</th><th>Pareto</th></tr>\n";
   for (const auto& p : s.points) {
     const bool any = p.pareto_bytes || p.pareto_compress || p.pareto_decode;
     const std::string marks = std::string(p.pareto_bytes ? "B" : "") + (p.pareto_compress ? "C" : "") +
@@ -176,33 +399,69 @@ std::string ReportHtml(const SweepSummary& s, const SweepOptions& o, const std::
         p.psnr_db ? fmt::format("{:.2f}", *p.psnr_db) : "inf", p.mean_ssim ? fmt::format("{:.4f}", *p.mean_ssim) : "-",
         p.max_abs, any ? "&#9733; " + marks : "");
   }
-  h += "</table>\n";
-  if (!s.renders.empty()) {
-    h += "<h2>Rendered comparison</h2>\n<p>Ground truth = the dataset, interpolated between its sampled directions "
-         "(barycentric over the three nearest views &times; lights, nearest texel); decoded = the codec's own "
-         "arbitrary-direction decoder. For each method the smallest setting with a relative error of at most " +
-         fmt::format("{:g} %", 100 * o.render_max_rel_error) + " is shown (else the most accurate one). Both images share "
-         "one exposure; the difference is |decoded &minus; truth| in luminance relative to the truth's "
-         "99th-percentile luminance, in false colour (dark blue 0, yellow = full scale). Environment lighting sums "
-         + std::to_string(o.render_options.environment_samples) +
-         " fixed directions without visibility (Sattler et al. 2003, section 5).</p>\n<div class=\"renders\">\n";
-    for (const auto& r : s.renders)
-      h += fmt::format("<h3>{}: {}, {} light</h3>\n<p>max difference {:.3g} %, mean {:.3g} %</p>\n", Html(r.label),
-                       r.scene, r.lighting, 100 * r.max_rel_diff, 100 * r.mean_rel_diff) +
-           "<img alt=\"" + Html(r.label) + "\" src=\"data:image/png;base64," + Base64(ReadBytes(r.file)) + "\">\n";
-    h += "</div>\n";
-  }
-  h += "<h2>Metrics</h2>\n<ul>"
-       "<li>RMSE = sqrt(mean over all values of (decoded &minus; truth)&sup2;)</li>"
-       "<li>relative L2 = ||decoded &minus; truth||<sub>2</sub> / ||truth||<sub>2</sub> over all values</li>"
-       "<li>PSNR = 10 log<sub>10</sub>(peak&sup2; / MSE), peak = the truth's maximum value</li>"
-       "<li>SSIM: mean over images, texels and channels of Wang et al. (2004) SSIM with a Gaussian window "
-       "(&sigma; = 1.5 texels, truncated at 3&sigma;), C1 = (0.01 peak)&sup2;, C2 = (0.03 peak)&sup2;</li>"
-       "<li>Times: wall clock on this machine, median of the runs; compression from an in-memory dataset, decoding "
-       "of the whole BTF to memory (Codec::DecodeAll; each run repeats it for at least 20 ms and reports the time "
-       "per decode). Other processes on the machine add noise.</li></ul>\n";
-  h += "<p>Data: <code>results.json</code> next to this file. Definitions: docs/btf-eval.md.</p>\n</body></html>\n";
-  return h;
+  return h + "</table>\n";
+}
+
+// What lights a panel, for its caption.
+std::string LightingText(const SweepRender& r, const RenderOptions& ro) {
+  if (r.lighting == "environment")
+    return fmt::format("the procedural &ldquo;{}&rdquo; environment ({} fixed directions, no visibility)",
+                       ro.environment, ro.environment_samples);
+  const Vec3& l = ro.light_position;
+  const double elevation = RadToDeg(std::atan2(l.z(), std::hypot(l.x(), l.y())));
+  return fmt::format("a point light at ({:g}, {:g}, {:g}), {:.0f}&deg; above the horizon seen from the centre",
+                     l.x(), l.y(), l.z(), elevation);
+}
+
+std::string ReportRenders(const SweepSummary& s, const SweepOptions& o) {
+  if (s.renders.empty()) return {};
+  std::string h =
+      "<h2>Rendered comparison</h2>\n<p>Each picture: ground truth | decoded | difference. Ground truth = the "
+      "dataset, interpolated between its sampled directions (barycentric over the three nearest views &times; "
+      "lights, nearest texel); decoded = the codec's own arbitrary-direction decoder. For each method the smallest "
+      "setting with a relative error of at most " +
+      fmt::format("{:g} %", 100 * o.render_max_rel_error) +
+      " is shown (else the most accurate one). Both images share one exposure; the difference is |decoded &minus; "
+      "truth| in luminance relative to the truth's 99th-percentile luminance, in the viridis colour map from dark "
+      "blue (0) to yellow (10 % or more). The camera is at (0, &minus;3.2, 2.6) looking at the origin; the patch is "
+      "a flat 2 &times; 2 square, the cylinder has radius 0.6 and length 2 (Sattler et al. 2003, section 5, for "
+      "the environment integration).</p>\n<div class=\"renders\">\n";
+  for (const auto& r : s.renders)
+    h += fmt::format("<figure class=\"render\"><img alt=\"{0}: {1}, {2} light\" src=\"data:image/png;base64,{3}\">"
+                     "<figcaption><b>{0}</b>: {1} under {4}. Largest difference {5:.3g} %, mean {6:.3g} %."
+                     "</figcaption></figure>\n",
+                     EscapeXml(r.label), r.scene, r.lighting, Base64(ReadBytes(r.file)),
+                     LightingText(r, o.render_options), 100 * r.max_rel_diff, 100 * r.mean_rel_diff);
+  return h + "</div>\n";
+}
+
+std::string ReportMetrics() {
+  return "<h2>Metrics</h2>\n<ul>"
+         "<li>RMSE = sqrt(mean over all values of (decoded &minus; truth)&sup2;)</li>"
+         "<li>relative L2 = ||decoded &minus; truth||<sub>2</sub> / ||truth||<sub>2</sub> over all values</li>"
+         "<li>PSNR = 10 log<sub>10</sub>(peak&sup2; / MSE), peak = the truth's maximum value</li>"
+         "<li>SSIM: mean over images, texels and channels of Wang et al. (2004) SSIM with a Gaussian window "
+         "(&sigma; = 1.5 texels, truncated at 3&sigma;), C1 = (0.01 peak)&sup2;, C2 = (0.03 peak)&sup2;</li>"
+         "<li>Times: wall clock on this machine, median of the runs; compression from an in-memory dataset, decoding "
+         "of the whole BTF to memory (Codec::DecodeAll; each run repeats it for at least 20 ms and reports the time "
+         "per decode). Other processes on the machine add noise.</li></ul>\n"
+         "<p>Data: <code>results.json</code> next to this file. Definitions: docs/btf-eval.md.</p>\n</body></html>\n";
+}
+
+std::string ReportHtml(const SweepSummary& s, const SweepOptions& o,
+                       const std::vector<std::pair<std::string, Plot>>& plots) {
+  return ReportHead(s) + ReportIntro(s, o) + ReportPlots(plots) + ReportTable(s) + ReportRenders(s, o) +
+         ReportMetrics();
+}
+
+// results.json and report.html (last), added to the summary's files.
+void WriteResultsAndReport(const std::filesystem::path& dir, const SweepOptions& o,
+                           const std::vector<std::pair<std::string, Plot>>& plots, SweepSummary& s) {
+  s.report = (dir / "report.html").string();
+  s.files.push_back((dir / "results.json").string());
+  s.files.push_back(s.report);
+  WriteTextFileAtomic(dir / "results.json", s.ToJson().dump(2));
+  WriteTextFileAtomic(s.report, ReportHtml(s, o, plots));
 }
 
 }  // namespace
@@ -230,13 +489,14 @@ nlohmann::json SweepPoint::ToJson() const {
 }
 
 std::string SweepSummary::Report() const {
-  std::string r = fmt::format("{:<22} {:>10} {:>7} {:>11} {:>11} {:>11} {:>9}\n", "setting", "bytes", "ratio",
-                              "compress s", "decode s", error_metric, "Pareto");
+  std::string r = fmt::format("{:<22} {:>10} {:>7} {:>11} {:>11} {:>11} {:>8} {:>9}\n", "setting", "bytes", "ratio",
+                              "compress s", "decode s", error_metric, "PSNR dB", "Pareto");
   for (const auto& p : points)
-    r += fmt::format("{:<22} {:>10} {:>7.1f} {:>11.4g} {:>11.4g} {:>11.4g} {:>9}\n",
+    r += fmt::format("{:<22} {:>10} {:>7.1f} {:>11.4g} {:>11.4g} {:>11.4g} {:>8} {:>9}\n",
                      p.method == "lpca" ? fmt::format("lpca k={} c={}", p.clusters, p.components)
                                         : fmt::format("{} c={}", p.method, p.components),
                      p.bytes, p.ratio_float32, p.compress_s, p.decode_s, p.error,
+                     p.psnr_db ? fmt::format("{:.2f}", *p.psnr_db) : "inf",
                      std::string(p.pareto_bytes ? "B" : "") + (p.pareto_compress ? "C" : "") + (p.pareto_decode ? "D" : ""));
   return r + fmt::format("report: {}\n", report);
 }
@@ -266,167 +526,31 @@ SweepSummary RunSweep(const SweepOptions& o, const std::filesystem::path& datase
                       const Reporter& reporter) {
   o.Check();
   Timer timer;
-  const Dataset data = ReadDataset(dataset_path);
-  // Refuse NaN/Inf up front with the item named (Compress would too, but only for the first method).
+  const Dataset data = ReadChecked(dataset_path);
   const auto truth = MemorySource(data, dataset_path.string());
-  for (int v = 0; v < data.num_views(); ++v) CheckFiniteSlot(*truth, v, data.view_slot(v).data());
   std::filesystem::create_directories(dir);
   if (o.keep_codecs) std::filesystem::create_directories(dir / "codecs");
-  SweepSummary s;
-  s.dataset = dataset_path.string();
-  s.output_dir = dir.string();
-  s.error_metric = o.error_metric;
-  s.views = data.num_views(), s.lights = data.num_lights(), s.height = data.height(), s.width = data.width();
-  s.channels = data.channels();
-  s.raw_float32_bytes = std::uint64_t(data.size()) * 4;
+  SweepSummary s = Describe(dataset_path, dir, data, o);
   s.times.Add("read", timer.Seconds());
 
-  // The settings, in a fixed order.
-  std::vector<SweepPoint> todo;
-  for (const auto& m : o.methods) {
-    const std::vector<int> ks = m == "lpca" ? o.clusters : std::vector<int>{0};
-    for (int k : ks)
-      for (int c : o.components) {
-        SweepPoint p;
-        p.method = m, p.components = c, p.clusters = k;
-        todo.push_back(p);
-      }
-  }
-  // The codec each method renders (see SweepOptions::render_max_rel_error), with its point index.
-  struct Chosen {
-    std::size_t index;
-    bool within;  // meets the error bound
-    Codec codec;
-  };
-  std::map<std::string, Chosen> chosen;
-  CompareOptions co;
-  co.ssim = o.ssim;
-  for (std::size_t i = 0; i < todo.size(); ++i) {
-    SweepPoint p = todo[i];
-    reporter.Progress(i, todo.size(), "sweep");
-    CompressOptions opt;
-    opt.method = ParseMethod(p.method);
-    opt.components = p.components;
-    if (p.clusters) opt.clusters = p.clusters;
-    opt.seed = o.seed;
-    opt.log_transform = o.log_transform;
-    Codec codec;
-    CompressSummary cs;
-    for (int r = 0; r < o.runs; ++r) {
-      Timer t;
-      cs = Compress(opt, *truth, &codec);
-      p.compress_runs.push_back(t.Seconds());
-    }
-    p.warnings = cs.warnings;
-    for (const auto& w : p.warnings) reporter.Warn("{}: {}", PointName(p), w);
-    p.stored_components = cs.components;
-    p.stored_clusters = cs.clusters;
-    p.bytes = codec.StoredBytes();
-    p.ratio_float32 = p.bytes ? double(codec.RawBytes(4)) / double(p.bytes) : 0;
-    p.ratio_half = p.bytes ? double(codec.RawBytes(2)) / double(p.bytes) : 0;
-    // Decoding small codecs takes microseconds: each run repeats it until it has taken at least
-    // 20 ms and reports the time per decode, so scheduler noise does not dominate.
-    Dataset decoded;
-    for (int r = 0; r < o.runs; ++r) {
-      Timer t;
-      int n = 0;
-      do {
-        decoded = codec.DecodeAll();
-        ++n;
-      } while (t.Seconds() < 0.02);
-      p.decode_runs.push_back(t.Seconds() / n);
-    }
-    p.compress_s = Median(p.compress_runs);
-    p.decode_s = Median(p.decode_runs);
-    const CompareSummary e = Compare(co, *truth, *MemorySource(decoded, PointName(p)));
-    s.psnr_peak = e.peak;
-    p.rmse = e.rmse, p.max_abs = e.max_abs, p.rel_l2 = e.rel_l2, p.psnr_db = e.psnr_db, p.mean_ssim = e.mean_ssim;
-    p.error = o.error_metric == "rel" && e.rel_l2 ? *e.rel_l2 : e.rmse;
-    if (o.keep_codecs) {
-      const auto file = dir / "codecs" / (PointName(p) + ".h5");
-      WriteCodec(file, codec, "btf-eval sweep");
-      p.codec_file = file.string();
-      p.file_bytes = std::filesystem::file_size(file);
-    }
-    reporter.Info("{}: {} bytes (ratio {:.1f}), compress {:.4g} s, decode {:.4g} s, {} {:.5g}", PointName(p), p.bytes,
-                  p.ratio_float32, p.compress_s, p.decode_s, o.error_metric, p.error);
-    if (o.render) {
-      const bool within = p.rel_l2 && *p.rel_l2 <= o.render_max_rel_error;
-      auto it = chosen.find(p.method);
-      bool take = it == chosen.end();
-      if (!take) {
-        const SweepPoint& q = s.points[it->second.index];
-        take = within ? (!it->second.within || p.bytes < q.bytes) : (!it->second.within && p.error < q.error);
-      }
-      if (take) chosen.insert_or_assign(p.method, Chosen{s.points.size(), within, std::move(codec)});
-    }
-    s.points.push_back(std::move(p));
-  }
-  reporter.Progress(todo.size(), todo.size(), "sweep");
+  timer.Restart();
+  RenderChoice choice(o.render_max_rel_error);
+  s.points = MeasureSettings(data, *truth, o, dir, reporter, choice, &s.psnr_peak);
   s.times.Add("sweep", timer.Seconds());
 
-  // Pareto fronts and plots.
   timer.Restart();
-  std::vector<double> err, bytes, ct, dt;
-  for (const auto& p : s.points)
-    err.push_back(p.error), bytes.push_back(double(p.bytes)), ct.push_back(p.compress_s), dt.push_back(p.decode_s);
-  const auto fb = ParetoFront(bytes, err), fc = ParetoFront(ct, err), fd = ParetoFront(dt, err);
-  for (int i : fb) s.points[i].pareto_bytes = true;
-  for (int i : fc) s.points[i].pareto_compress = true;
-  for (int i : fd) s.points[i].pareto_decode = true;
-  const std::string ylab = o.error_metric == "rel" ? "relative L2 error" : "RMSE";
-  const std::vector<std::pair<std::string, Plot>> plots = {
-      {"error_vs_bytes", CostPlot(s.points, ylab + " vs stored bytes", "stored bytes", ylab, nullptr, &SweepPoint::bytes, fb, true)},
-      {"error_vs_compress_time",
-       CostPlot(s.points, ylab + " vs compression time", "compression time (s, median)", ylab, &SweepPoint::compress_s, nullptr, fc, false)},
-      {"error_vs_decode_time",
-       CostPlot(s.points, ylab + " vs decoding time", "decoding time (s, median)", ylab, &SweepPoint::decode_s, nullptr, fd, false)}};
-  std::vector<std::string> plot_names;
-  for (const auto& [name, plot] : plots) {
-    WriteTextFileAtomic(dir / (name + ".svg"), PlotSvg(plot));
-    WritePng(dir / (name + ".png"), PlotImage(plot));
-    s.files.push_back((dir / (name + ".svg")).string());
-    s.files.push_back((dir / (name + ".png")).string());
-    plot_names.push_back(name);
-  }
+  const auto plots = MakePlots(s.points, o.error_metric);
+  WritePlots(dir, plots, s.files);
   s.times.Add("plots", timer.Seconds());
 
-  // Rendered comparisons: ground truth (the dataset) against the best codec of each method.
   if (o.render) {
     timer.Restart();
-    const auto gt = DatasetEvaluator(data);
-    const std::pair<const char*, const char*> panels[] = {{"patch", "point"}, {"cylinder", "environment"}};
-    for (const auto& [scene, lighting] : panels) {
-      RenderOptions ro = o.render_options;
-      ro.scene = scene;
-      ro.lighting = lighting;
-      const Image truth_img = Render(*gt, ro);
-      for (const auto& m : o.methods) {
-        const auto it = chosen.find(m);
-        if (it == chosen.end()) continue;
-        const std::string label = PointName(s.points[it->second.index]);
-        const Image test_img = Render(*CodecEvaluator(it->second.codec), ro);
-        SweepRender r;
-        r.method = m, r.label = label, r.scene = scene, r.lighting = lighting;
-        PanelStats ps;
-        const Image panel = ComparisonPanel(truth_img, test_img, "ground truth", "decoded " + label, 0.1, &ps);
-        r.max_rel_diff = ps.max_rel_diff;
-        r.mean_rel_diff = ps.mean_rel_diff;
-        r.file = (dir / fmt::format("render_{}_{}_{}.png", m, scene, lighting)).string();
-        WritePng(r.file, panel);
-        s.files.push_back(r.file);
-        s.renders.push_back(r);
-      }
-    }
+    s.renders = RenderComparisons(data, s.points, choice, o, dir, reporter, s.files);
     s.times.Add("render", timer.Seconds());
   }
 
   timer.Restart();
-  s.report = (dir / "report.html").string();
-  WriteTextFileAtomic(dir / "results.json", s.ToJson().dump(2));
-  s.files.push_back((dir / "results.json").string());
-  WriteTextFileAtomic(s.report, ReportHtml(s, o, dir, plot_names));
-  s.files.push_back(s.report);
+  WriteResultsAndReport(dir, o, plots, s);
   s.times.Add("report", timer.Seconds());
   return s;
 }

@@ -1,7 +1,7 @@
 #pragma once
 // Codec sweeps: compress a dataset with each setting, time compression and decoding, measure the
-// error and the size, then write results.json, plots (PNG + SVG) and a self-contained HTML report
-// (docs/btf-eval.md, "sweep").
+// error and the size, then write results.json, SVG plots, rendered comparisons (PNG) and a
+// self-contained HTML report with the plots inline (docs/btf-eval.md, "sweep").
 #include <cstdint>
 #include <filesystem>
 #include <optional>
@@ -15,6 +15,12 @@
 #include "libbtf/eval/render.h"
 
 namespace btf {
+
+// The point light of the sweep's patch render (world, z up; the patch is |x|, |y| <= 1 at z = 0,
+// the camera at (0, -3.2, 2.6) looking at the origin): far behind the patch as the camera sees it
+// and low, 11 degrees above the horizon seen from the patch centre. Under this grazing light the
+// yarns' specular highlights show, which an overhead light leaves as small spots.
+inline const Vec3 kSweepPointLight{0.5, 5.0, 1.0};
 
 struct SweepOptions {
   std::vector<std::string> methods{"pca-view", "lpca"};  // codec methods (libbtf/compress)
@@ -31,7 +37,14 @@ struct SweepOptions {
   // Which setting of each method is rendered: the smallest (fewest bytes) whose relative L2 error
   // is <= render_max_rel_error, or the most accurate one if none is (or the error is undefined).
   double render_max_rel_error = 0.02;
-  RenderOptions render_options; // size and scene defaults for the renders (scene/lighting are set per panel)
+  // Size, environment and point light of the renders (scene and lighting are set per panel: the
+  // patch under the point light, the cylinder under the environment). The point light defaults
+  // to kSweepPointLight, not RenderOptions' overhead light.
+  RenderOptions render_options = [] {
+    RenderOptions r;
+    r.light_position = kSweepPointLight;
+    return r;
+  }();
   std::string command_line;     // shown in the report (how it was made)
   void Check() const;
 };

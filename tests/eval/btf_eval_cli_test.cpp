@@ -4,7 +4,9 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <set>
 
+#include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
 #include "libbtf/compress/codec.h"
@@ -113,17 +115,43 @@ TEST(BtfEvalCli, SweepWritesResultsPlotsAndReport) {
     for (const auto& p : j["points"]) n += p["pareto"][front].get<bool>();
     EXPECT_GE(n, 1) << front;
   }
-  for (const char* f : {"results.json", "report.html", "error_vs_bytes.png", "error_vs_bytes.svg",
-                        "error_vs_compress_time.png", "error_vs_decode_time.svg"})
+  for (const char* f : {"results.json", "report.html", "error_vs_bytes.svg", "error_vs_compress_time.svg",
+                        "error_vs_decode_time.svg"})
     EXPECT_TRUE(std::filesystem::exists(dir / "sweep" / f)) << f;
+  // Plots are SVG only: the only PNGs are the rendered comparisons, and `files` lists what exists.
+  std::set<std::string> pngs;
+  for (const auto& e : std::filesystem::directory_iterator(dir / "sweep"))
+    if (e.path().extension() == ".png") pngs.insert(e.path().filename().string());
+  EXPECT_EQ(pngs, (std::set<std::string>{"render_lpca_cylinder_environment.png", "render_lpca_patch_point.png",
+                                         "render_pca-view_cylinder_environment.png", "render_pca-view_patch_point.png"}));
+  for (const auto& f : j["files"]) {
+    const std::filesystem::path file = f.get<std::string>();
+    EXPECT_TRUE(std::filesystem::exists(file)) << file;
+    if (file.filename().string().rfind("error_vs_", 0) == 0) {
+      EXPECT_EQ(file.extension(), ".svg") << file;
+    }
+  }
   EXPECT_EQ(j["renders"].size(), 4u);  // 2 methods x (patch + point, cylinder + environment)
-  // The report is self-contained: images are data URIs, nothing refers to other files.
+  // The report is self-contained: the plots are inline SVG figures with their text in captions,
+  // the renders PNG data URIs; nothing refers to other files.
   std::ifstream in(dir / "sweep" / "report.html");
   const std::string html((std::istreambuf_iterator<char>(in)), {});
-  EXPECT_NE(html.find("data:image/svg+xml;base64,"), std::string::npos);
+  std::size_t figures = 0;
+  for (std::size_t pos = 0; (pos = html.find("<figure class=\"plot\">\n<svg", pos)) != std::string::npos; ++pos) ++figures;
+  EXPECT_EQ(figures, 3u);
+  EXPECT_NE(html.find("<figcaption><b>relative L2 error vs stored bytes</b>"), std::string::npos);
+  EXPECT_EQ(html.find("data:image/svg+xml"), std::string::npos);
+  EXPECT_EQ(html.find(".svg\""), std::string::npos);
   EXPECT_NE(html.find("data:image/png;base64,"), std::string::npos);
   EXPECT_EQ(html.find("src=\"error_"), std::string::npos);
   EXPECT_EQ(html.find("src=\"render_"), std::string::npos);
+  // The text table has the relative error and PSNR of each setting.
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-eval") + " sweep " + Q(dir / "d.h5") + " -o " + Q(dir / "sweep2") +
+                                 " --methods pca-view --components 1 --runs 1 --no-render --no-codecs -q",
+                             &out),
+            0);
+  EXPECT_NE(out.find("PSNR dB"), std::string::npos) << out;
+  EXPECT_NE(out.find(fmt::format("{:.2f}", j["points"][0]["errors"]["psnr_db"].get<double>())), std::string::npos) << out;
 }
 
 TEST(BtfEvalCli, SweepRefusesBadInputAndOptions) {

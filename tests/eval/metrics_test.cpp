@@ -8,6 +8,7 @@
 #include <limits>
 
 #include "libbtf/core/error.h"
+#include "libbtf/eval/annotate.h"
 #include "libbtf/io/dataset_io.h"
 #include "tests/test_util.h"
 
@@ -173,7 +174,42 @@ TEST(EvalMetrics, FileStreamingMatchesMemoryAndWritesErrorMaps) {
   for (const auto& f : b.error_map_files) {
     const Image im = ReadImage(f);
     EXPECT_GE(im.width, 256);  // 7 texels upscaled to at least 256 pixels
+    // Written as sRGB PNGs: the white margin reads back as white.
+    EXPECT_NEAR(im.at(0, 0, 0), 1.0f, 1e-3);
   }
+}
+
+TEST(EvalMetrics, ErrorMapColorsAndColorBar) {
+  // 4 x 3 texels, 2 channels: texel (y 0, x 0) is off by `scale` in both channels (RMS = scale),
+  // texel (y 1, x 2) by half of it, the rest exact.
+  const int h = 3, w = 4, c = 2;
+  const double scale = 0.2;
+  std::vector<float> ref(h * w * c, 0.3f), test = ref;
+  test[0] += 0.2f, test[1] -= 0.2f;
+  test[(1 * w + 2) * c] += 0.1f, test[(1 * w + 2) * c + 1] += 0.1f;
+  const Image im = ErrorMapImage(ref.data(), test.data(), h, w, c, scale, 256);
+  const int zoom = 64, pad = 8;  // 4 texels upscaled to 256 pixels
+  ASSERT_EQ(im.width, 4 * zoom + 2 * pad);
+  float lo[3], mid[3], hi[3];
+  FalseColor(0, lo), FalseColor(0.5, mid), FalseColor(1, hi);
+  auto expect_color = [&](int x, int y, const float* want) {
+    for (int k = 0; k < 3; ++k) EXPECT_NEAR(im.at(x, y, k), want[k], 1e-4) << x << "," << y << " " << k;
+  };
+  expect_color(pad + zoom / 2, pad + zoom / 2, hi);                // texel (0, 0)
+  expect_color(pad + 2 * zoom + 3, pad + zoom + zoom - 3, mid);    // texel (y 1, x 2)
+  expect_color(pad + 4 * zoom - 1, pad + 3 * zoom - 1, lo);        // texel (y 2, x 3)
+  // The colour bar runs through the same map, 0 at the left end, `scale` at the right.
+  const int bar_y = pad + 3 * zoom + 6 + 6;
+  expect_color(pad, bar_y, lo);
+  expect_color(im.width - pad - 1, bar_y, hi);
+  // Its numbers are drawn below it (when the font exists).
+  int dark = 0;
+  for (int y = bar_y + 8; y < im.height; ++y)
+    for (int x = 0; x < im.width; ++x) dark += im.at(x, y, 0) < 0.5f;
+  if (LabelFont().empty())
+    EXPECT_EQ(dark, 0);
+  else
+    EXPECT_GT(dark, 50);
 }
 
 TEST(EvalMetrics, OptionsAreChecked) {

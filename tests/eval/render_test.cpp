@@ -3,9 +3,11 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdlib>
 
 #include "libbtf/compress/codec.h"
 #include "libbtf/compress/codec_source.h"
+#include "libbtf/eval/annotate.h"
 #include "tests/codec_util.h"
 #include "tests/test_util.h"
 
@@ -124,7 +126,52 @@ TEST(EvalRender, ComparisonPanelReportsTheDifference) {
   const Image panel = ComparisonPanel(a, b, "truth", "test", 0.1, &st);
   EXPECT_NEAR(st.max_rel_diff, 0.05, 1e-6);  // 5 % of the truth level everywhere
   EXPECT_NEAR(st.mean_rel_diff, 0.05, 1e-6);
-  EXPECT_GT(panel.width, 30);
+  // Layout: 8-pixel gaps, a 22-pixel label strip, then truth | test | difference.
+  ASSERT_EQ(panel.width, 3 * 10 + 4 * 8);
+  ASSERT_EQ(panel.height, 8 + 22 + 8);
+  // The truth (luminance 1 = its 99th percentile) shows at exposure 0.8; the difference, 5 % of
+  // a 10 % full scale, is the middle of the colour map.
+  float mid[3];
+  FalseColor(0.5, mid);
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_NEAR(panel.at(8 + 5, 22 + 4, k), 0.8f, 1e-5);
+    EXPECT_NEAR(panel.at(8 + 2 * 18 + 5, 22 + 4, k), mid[k], 1e-5);
+  }
+}
+
+// Counts pixels of the label strip (above the images) that are not the white background.
+int LabelPixels(const Image& panel) {
+  int n = 0;
+  for (int y = 0; y < 22; ++y)
+    for (int x = 0; x < panel.width; ++x) n += panel.at(x, y, 0) < 0.9f;
+  return n;
+}
+
+TEST(EvalRender, ComparisonPanelLabelsUseTheFont) {
+  if (LabelFont().empty()) GTEST_SKIP() << "no DejaVu Sans (fonts-dejavu-core) on this machine";
+  Image a(120, 40, 3);
+  std::fill(a.pixels.begin(), a.pixels.end(), 0.5f);
+  PanelStats st;
+  const Image panel = ComparisonPanel(a, a, "ground truth", "decoded", 0.1, &st);
+  EXPECT_TRUE(st.labelled);
+  EXPECT_GT(LabelPixels(panel), 100);  // three labels of dark glyphs on white
+}
+
+TEST(EvalRender, ComparisonPanelWithoutAFontHasNoText) {
+  const char* old = std::getenv("BTF_FONT");
+  const std::string saved = old ? old : "";
+  setenv("BTF_FONT", "/nonexistent/font.ttf", 1);
+  Image a(120, 40, 3);
+  std::fill(a.pixels.begin(), a.pixels.end(), 0.5f);
+  PanelStats st;
+  const Image panel = ComparisonPanel(a, a, "ground truth", "decoded", 0.1, &st);
+  if (old)
+    setenv("BTF_FONT", saved.c_str(), 1);
+  else
+    unsetenv("BTF_FONT");
+  EXPECT_FALSE(st.labelled);
+  EXPECT_EQ(LabelPixels(panel), 0);
+  EXPECT_EQ(panel.width, 3 * 120 + 4 * 8);  // same layout, blank strip
 }
 
 TEST(EvalRender, OptionsAreChecked) {
