@@ -6,8 +6,8 @@
 //  - Eval returns the BRDF f (1/sr) WITHOUT cos(theta_o); Mitsuba's eval returns f * cos(theta_o).
 //  - double precision; cells are found with floor (Mitsuba truncates, defined only for uv >= 0).
 //  - the spine radius uses a closed form valid for every branch (ellipse/circle/parabola/hyperbola).
-//  - N_spec is computed with >= 1e6 padded-stratified samples of our own generator (Mitsuba: 1e4
-//    SFMT samples), so values agree with Mitsuba's only up to Mitsuba's own Monte Carlo noise.
+//  - N_spec is computed by deterministic quadrature, relative error ~1e-7 (Mitsuba: 1e4 SFMT
+//    samples), so values agree with Mitsuba's only up to Mitsuba's own Monte Carlo noise.
 //  - randomness (umax noise, intensity variation) is off by default ("noise": false); when on it
 //    uses our own hash and gradient noise, not Mitsuba's random sequence.
 #include <memory>
@@ -37,13 +37,28 @@ double VonMises(double cos_x, double b);
 // Seeliger attenuation (1/4pi) c1 c2 / (c1 + c2) with c = max(0, cos); 0 if either is 0.
 double Seeliger(double cos1, double cos2);
 
+// Orthonormal frame of the fibre at yarn coordinates (u, v) (u along the yarn, v across) for twist
+// psi, in the yarn's local frame (x across, y along, z = normal). With e_x = (1, 0, 0),
+// e_n = (0, sin u, cos u) and e_t = (0, cos u, -sin u):
+//   n = sin v e_x + cos v e_n                                   (yarn surface normal)
+//   t = -sin psi cos v e_x + sin psi sin v e_n + cos psi e_t    (fibre tangent)
+//   b = cos psi cos v e_x - cos psi sin v e_n + sin psi e_t     (completes the frame).
+// N_spec's quadrature writes direction pairs in this frame (docs/btf-synth.md, "Normalization").
+struct FibreFrame {
+  Vec3 n, t, b;
+};
+FibreFrame MakeFibreFrame(double u, double v, double psi);
+
 }  // namespace irawan2012
 
 struct Irawan2012Options {
   double repeat_u = 1, repeat_v = 1;  // weave repeats per uv tile (Mitsuba's repeatU / repeatV)
   bool noise = false;                 // umax noise + intensity variation (off = ground truth)
-  long long nspec_samples = 1 << 20;  // samples for N_spec (rounded up to a square n x n)
+  // Gauss-Legendre order of the N_spec quadrature, 4..64 (docs/btf-synth.md): 16 gives a relative
+  // error of about 1e-7; the cost grows with order^5. The error estimate compares with a lower order.
+  int nspec_order = 16;
   double tile_mm = 4.0;               // physical size of one uv tile
+  void Check() const;                 // throws btf::Error (usage) naming the bad field
 };
 
 class Irawan2012Model : public SvbrdfModel {
@@ -64,8 +79,16 @@ class Irawan2012Model : public SvbrdfModel {
   // S_spec alone: the band value of irawan-models.md 2.3 (no iv, no area factor).
   double BandValue(const Vec2& uv, const Vec3& wi, const Vec3& wo) const;
 
+  // N_spec = 1 / (pi E[g]) (docs/btf-synth.md), by deterministic quadrature of order
+  // options().nspec_order; 0 when no yarn has a specular term.
   double specular_normalization() const { return nspec_; }
-  double specular_normalization_rel_stderr() const { return nspec_rel_err_; }
+  // Error estimate of N_spec, relative: |N_spec(order) - N_spec(lower order)| / N_spec, the lower
+  // order being order - max(2, order / 4). Conservative (the lower order's own error).
+  double specular_normalization_rel_error() const { return nspec_rel_err_; }
+  // E[g] by the quadrature at Gauss-Legendre order `order` (2..64): N_spec = 1 / (pi E[g]) at
+  // order options().nspec_order; public so that tests can compare orders. Deterministic (the
+  // same bits on any thread count).
+  double SpecularMean(int order) const;
   // 1-based indices of the yarns whose specular term the reference guard w sin(umax) >= l zeroes.
   const std::vector<int>& disabled_yarns() const { return disabled_; }
   const WeavePattern& pattern() const { return pattern_; }
@@ -86,12 +109,14 @@ class Irawan2012Model : public SvbrdfModel {
     double cell_x, cell_y;      // unrotated position X, Y (cells)
   };
   Local Locate(const Vec2& uv) const;
+  Local LocateCell(double cell_x, double cell_y) const;  // from unrotated cell coordinates X, Y
   double Band(const Local& loc, Vec3 wi, Vec3 wo) const;
   // EvalRgb for unit directions above the surface.
   void EvalUnit(const Vec2& uv, const Vec3& wi, const Vec3& wo, double out[3]) const;
   double IntensityVariation(const Local& loc) const;
   double NoisyUmax(const Local& loc, const WeaveYarn& y) const;
   void ComputeNormalization();
+  double SpecularMean(int order, long long* node_count) const;
 
   std::string preset_;
   WeavePattern pattern_;
@@ -99,7 +124,7 @@ class Irawan2012Model : public SvbrdfModel {
   std::vector<YarnCache> cache_;
   std::vector<int> disabled_;
   double nspec_ = 0, nspec_rel_err_ = 0;
-  long long nspec_used_ = 0;
+  long long nspec_nodes_ = 0;  // outer quadrature nodes (u, v) of the order-nspec_order estimate
 };
 
 // Builds the model from a preset name (WeavePresetNames()) or a path to a `.wv` file, with
