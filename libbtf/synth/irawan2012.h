@@ -6,7 +6,7 @@
 //  - Eval returns the BRDF f (1/sr) WITHOUT cos(theta_o); Mitsuba's eval returns f * cos(theta_o).
 //  - double precision; cells are found with floor (Mitsuba truncates, defined only for uv >= 0).
 //  - the spine radius uses a closed form valid for every branch (ellipse/circle/parabola/hyperbola).
-//  - N_spec is computed by deterministic quadrature, relative error ~1e-7 (Mitsuba: 1e4 SFMT
+//  - N_spec is computed by deterministic quadrature, relative error ~1e-6 or less (Mitsuba: 1e4 SFMT
 //    samples), so values agree with Mitsuba's only up to Mitsuba's own Monte Carlo noise.
 //  - randomness (umax noise, intensity variation) is off by default ("noise": false); when on it
 //    uses our own hash and gradient noise, not Mitsuba's random sequence.
@@ -55,7 +55,8 @@ struct Irawan2012Options {
   double repeat_u = 1, repeat_v = 1;  // weave repeats per uv tile (Mitsuba's repeatU / repeatV)
   bool noise = false;                 // umax noise + intensity variation (off = ground truth)
   // Gauss-Legendre order of the N_spec quadrature, 4..64 (docs/btf-synth.md): 16 gives a relative
-  // error of about 1e-7; the cost grows with order^5. The error estimate compares with a lower order.
+  // error of 1e-8 .. 1e-6 on the presets; the cost grows with order^5. The error estimate compares
+  // with a lower order.
   int nspec_order = 16;
   double tile_mm = 4.0;               // physical size of one uv tile
   void Check() const;                 // throws btf::Error (usage) naming the bad field
