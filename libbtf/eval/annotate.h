@@ -1,5 +1,5 @@
 #pragma once
-// Text, colour maps and compositing on images through OpenImageIO's ImageBufAlgo (render_text,
+// Text, color maps and compositing on images through OpenImageIO's ImageBufAlgo (render_text,
 // color_map, paste, resample), for the PNG pictures btf-eval writes (docs/btf-eval.md).
 //
 // Text needs a TrueType font: $BTF_FONT when set (a path), else DejaVu Sans from the Debian
@@ -17,15 +17,15 @@ namespace btf {
 // package) installs it; empty when there is none (docs/btf-eval.md, "Text in pictures").
 std::string LabelFont();
 
-// Draws UTF-8 `text` with its top-left corner at (x, y), about `size` pixels high, in colour
-// `rgb`, onto `image` (any channel count >= 3; the colour is written as given, so draw on display
+// Draws UTF-8 `text` with its top-left corner at (x, y), about `size` pixels high, in color
+// `rgb`, onto `image` (any channel count >= 3; the color is written as given, so draw on display
 // values, see ToDisplay). Returns false, drawing nothing, when there is no font or OpenImageIO
 // cannot use it.
 bool DrawText(Image& image, int x, int y, const std::string& text, int size, const std::array<float, 3>& rgb);
 // Width in pixels of `text` drawn at `size`; 0 when there is no font.
 int TextWidth(const std::string& text, int size);
 
-// The perceptually uniform "viridis" colour map of ImageBufAlgo::color_map (dark blue at 0,
+// The perceptually uniform "viridis" color map of ImageBufAlgo::color_map (dark blue at 0,
 // yellow at 1) applied to values / full_scale, clamped to [0, 1] (NaN shows as 1). `values` is
 // a width x height plane; the result is linear RGB (OpenImageIO tabulates its maps linear).
 Image FalseColorImage(const float* values, int width, int height, double full_scale);

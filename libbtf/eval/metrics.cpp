@@ -21,7 +21,7 @@ void CompareOptions::Check() const {
 
 namespace {
 
-// Normalised Gaussian taps for offsets -r..r, r = ceil(3 sigma).
+// Normalized Gaussian taps for offsets -r..r, r = ceil(3 sigma).
 std::vector<double> GaussianTaps(double sigma) {
   const int r = std::max(1, int(std::ceil(3 * sigma)));
   std::vector<double> w(2 * r + 1);
@@ -30,7 +30,7 @@ std::vector<double> GaussianTaps(double sigma) {
 }
 
 // Separable Gaussian blur of a height x width plane; taps outside the image are dropped and the
-// remaining weights renormalised, so borders are local means rather than means with zeros.
+// remaining weights renormalized, so borders are local means rather than means with zeros.
 void Blur(const std::vector<double>& in, int h, int w, const std::vector<double>& taps, std::vector<double>& tmp,
           std::vector<double>& out) {
   const int r = int(taps.size() / 2);
@@ -113,7 +113,7 @@ Image ErrorMapImage(const float* ref, const float* test, int h, int w, int c, do
   const int width = std::max(mw, 240) + 2 * pad, height = pad + mh + 6 + bar_h + 4 + text_size + 6;
   Image picture = Filled(width, height, {1, 1, 1});
   Paste(picture, FalseColorImage(rms.data(), w, h, scale), pad, pad, zoom);
-  // Colour bar with its scale, so the map can be read without the JSON (the numbers need a font:
+  // Color bar with its scale, so the map can be read without the JSON (the numbers need a font:
   // without one, see LabelFont, the bar is left unlabelled).
   const int bar_w = width - 2 * pad;
   std::vector<float> ramp(std::size_t(bar_w) * bar_h);
@@ -283,7 +283,7 @@ CompareSummary Compare(const CompareOptions& options, const SlotSource& ref, con
   s.worst.assign(images.begin(), images.begin() + std::min<std::size_t>(images.size(), options.worst_images));
   s.times.Add("compare", timer.Seconds());
 
-  // Error maps of the worst images, on one common scale so their colours compare.
+  // Error maps of the worst images, on one common scale so their colors compare.
   if (!options.error_maps_dir.empty() && options.error_maps > 0 && s.rmse > 0) {
     timer.Restart();
     if (!std::filesystem::is_directory(options.error_maps_dir))

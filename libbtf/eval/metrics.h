@@ -23,10 +23,10 @@ struct CompareOptions {
   // reference then uses 1.
   double peak = 0;
   // SSIM: standard deviation of the Gaussian window in texels (default 1.5, Wang et al. 2004); the
-  // window is truncated at 3 sigma and renormalised at image borders. K1 = 0.01, K2 = 0.03.
+  // window is truncated at 3 sigma and renormalized at image borders. K1 = 0.01, K2 = 0.03.
   double ssim_sigma = 1.5;
   bool ssim = true;  // false skips SSIM (the most expensive metric)
-  // Error maps: false-colour PNGs of the `error_maps` worst images (by RMSE) written to
+  // Error maps: false-color PNGs of the `error_maps` worst images (by RMSE) written to
   // `error_maps_dir` (must exist); empty dir = none.
   std::filesystem::path error_maps_dir;
   int error_maps = 4;
@@ -75,9 +75,9 @@ CompareSummary Compare(const CompareOptions& options, const SlotSource& referenc
 double MeanSsim(const float* reference, const float* test, int height, int width, int channels, double peak,
                 double sigma = 1.5);
 
-// False-colour error map of one image pair: per-texel RMS over channels through the "viridis"
+// False-color error map of one image pair: per-texel RMS over channels through the "viridis"
 // map (FalseColorImage: dark blue 0, yellow `scale`), upscaled by an integer factor to at least
-// `min_size` pixels, with a colour bar labelled 0 and `scale` (DejaVu Sans through OpenImageIO;
+// `min_size` pixels, with a color bar labelled 0 and `scale` (DejaVu Sans through OpenImageIO;
 // without a font, see LabelFont, the bar has no numbers). Returns linear values: write them with
 // srgb = true.
 Image ErrorMapImage(const float* reference, const float* test, int height, int width, int channels, double scale,

@@ -150,7 +150,7 @@ std::string Text(double x, double y, const std::string& text, const std::string&
 
 std::string AxisName(const std::string& label, const Axis& axis) { return label + (axis.log ? " (log scale)" : ""); }
 
-// The legend's key for one series: its marker shape (Unicode) in its colour, with dashes for a line.
+// The legend's key for one series: its marker shape (Unicode) in its color, with dashes for a line.
 std::string LegendKey(const PlotSeries& s) {
   static constexpr const char* kShapes[] = {"&#9679;", "&#9632;", "&#9650;", "&#9670;"};
   const std::string mark = !s.markers ? "" : s.ring_markers ? "&#9675;" : kShapes[s.shape % 4];
@@ -173,7 +173,7 @@ std::string Color::ToHex() const {
 }
 
 std::string PlotSvg(const Plot& plot) {
-  const std::string black = "#000000", grey = "#8c8c8c", light = "#e0e0e0";
+  const std::string black = "#000000", gray = "#8c8c8c", light = "#e0e0e0";
   const Axes axes = MakeAxes(plot);
   const Axis &ax = axes.x, &ay = axes.y;
   const double left = kLeft, top = kTop, bottom = kBottom, right = kRight;
@@ -201,8 +201,8 @@ std::string PlotSvg(const Plot& plot) {
   }
   out += Line(left, top, left, top + ph, 1, black);
   out += Line(left, top + ph, left + pw, top + ph, 1, black);
-  out += Line(left, top, left + pw, top, 1, grey);
-  out += Line(left + pw, top, left + pw, top + ph, 1, grey);
+  out += Line(left, top, left + pw, top, 1, gray);
+  out += Line(left + pw, top, left + pw, top + ph, 1, gray);
   // Series: lines first, then markers, then point labels.
   for (const auto& s : plot.series) {
     if (!s.line) continue;
@@ -216,7 +216,7 @@ std::string PlotSvg(const Plot& plot) {
   }
   for (const auto& s : plot.series)
     for (std::size_t i = 0; i < std::min(s.labels.size(), s.x.size()); ++i)
-      out += Text(X(s.x[i]) + 6, Y(s.y[i]) - 6, s.labels[i], grey, 11, "start");
+      out += Text(X(s.x[i]) + 6, Y(s.y[i]) - 6, s.labels[i], gray, 11, "start");
   out += "</svg>\n";
   return out;
 }

@@ -7,7 +7,7 @@
 
 namespace btf {
 
-// An sRGB colour, components in [0, 1].
+// An sRGB color, components in [0, 1].
 struct Color {
   double r = 0, g = 0, b = 0;
   static Color Hex(const std::string& hex);  // "#rrggbb"
@@ -37,7 +37,7 @@ struct Plot {
 // carry the title, axis names and legend for readers of the file alone.
 std::string PlotSvg(const Plot& plot);
 // The caption: title, axis names (with "log" where an axis is logarithmic) and a legend whose
-// entries show each series' marker shape in its colour.
+// entries show each series' marker shape in its color.
 std::string PlotCaptionHtml(const Plot& plot);
 // <figure class="plot"><svg>...</svg><figcaption>...</figcaption></figure>
 std::string PlotFigureHtml(const Plot& plot);
@@ -46,7 +46,7 @@ std::string PlotFigureHtml(const Plot& plot);
 // sorted by increasing x: the Pareto front when both coordinates are costs.
 std::vector<int> ParetoFront(const std::vector<double>& x, const std::vector<double>& y);
 
-// A palette of distinct colours for series i.
+// A palette of distinct colors for series i.
 Color SeriesColor(int i);
 
 // Escapes <, >, & and " for HTML and XML text and attributes.

@@ -154,7 +154,7 @@ void EnvironmentRadiance(const std::string& environment, const Vec3& d, double* 
     return;
   }
   if (environment == "studio") {
-    // Dim grey room, a strong key light front-left and a weaker fill behind-right.
+    // Dim gray room, a strong key light front-left and a weaker fill behind-right.
     const double key = 6.0 * Lobe(d, 40, -120, 24), fill = 2.0 * Lobe(d, 60, 60, 12);
     for (int k = 0; k < 3; ++k) rgb[k] = 0.05 + key + fill;
     return;

@@ -40,7 +40,7 @@ struct RenderOptions {
   int width = 280, height = 224;    // pixels
   double tiles = 3;                 // texture repeats along each side of the patch / along the cylinder
   // Point light position (world: z up, camera at (0, -3.2, 2.6) looking at the origin) and its
-  // radiant intensity; the default gives irradiance about 1 at normal incidence at the centre.
+  // radiant intensity; the default gives irradiance about 1 at normal incidence at the center.
   Vec3 light_position{1.2, -1.4, 2.6};
   double light_intensity = 10.2;
   int environment_samples = 128;    // fixed Fibonacci-sphere directions, 4 pi / N sr each
@@ -57,7 +57,7 @@ struct SurfacePoint {
 };
 SurfacePoint TracePixel(const RenderOptions& options, int px, int py);
 
-// Linear radiance image (3 channels; BTFs with 1 channel are shown grey, extra channels dropped).
+// Linear radiance image (3 channels; BTFs with 1 channel are shown gray, extra channels dropped).
 Image Render(const BtfEvaluator& btf, const RenderOptions& options);
 
 // Environment radiance (linear RGB) in world direction d (z up); exposed for tests and docs.

@@ -18,7 +18,7 @@ namespace btf {
 
 // The point light of the sweep's patch render (world, z up; the patch is |x|, |y| <= 1 at z = 0,
 // the camera at (0, -3.2, 2.6) looking at the origin): far behind the patch as the camera sees it
-// and low, 11 degrees above the horizon seen from the patch centre. Under this grazing light the
+// and low, 11 degrees above the horizon seen from the patch center. Under this grazing light the
 // yarns' specular highlights show, which an overhead light leaves as small spots.
 inline const Vec3 kSweepPointLight{0.5, 5.0, 1.0};
 

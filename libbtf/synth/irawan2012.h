@@ -1,13 +1,13 @@
 #pragma once
 // Irawan & Marschner 2012 woven-cloth model, behaving as Mitsuba 0.6's `irawan` BSDF does for the
-// same weave pattern and parameters (reference/irawan-models.md section 2; our own code).
+// same weave pattern and parameters (docs/btf-synth.md, "Irawan 2012"; our own code).
 //
 // Differences from Mitsuba, all deliberate and documented in docs/btf-synth.md:
 //  - Eval returns the BRDF f (1/sr) WITHOUT cos(theta_o); Mitsuba's eval returns f * cos(theta_o).
 //  - double precision; cells are found with floor (Mitsuba truncates, defined only for uv >= 0).
 //  - the spine radius uses a closed form valid for every branch (ellipse/circle/parabola/hyperbola).
-//  - N_spec is computed with >= 1e6 padded-stratified samples of our own generator (Mitsuba: 1e4
-//    SFMT samples), so values agree with Mitsuba's only up to Mitsuba's own Monte Carlo noise.
+//  - N_spec is computed by deterministic quadrature, relative error ~1e-6 or less (Mitsuba: 1e4 SFMT
+//    samples), so values agree with Mitsuba's only up to Mitsuba's own Monte Carlo noise.
 //  - randomness (umax noise, intensity variation) is off by default ("noise": false); when on it
 //    uses our own hash and gradient noise, not Mitsuba's random sequence.
 #include <memory>
@@ -23,7 +23,7 @@ namespace btf {
 namespace irawan2012 {
 
 // Radius of curvature of the yarn spine at inclination u (|u| <= umax), closed form for all
-// branches (irawan-models.md 2.4, rewritten without tan(u)):
+// branches (as Mitsuba 0.6's irawan plugin computes them, rewritten without tan(u)):
 //   R = C * sqrt(cot^2(umax) + q) / (cos^2 u + q sin^2 u)^(3/2),
 //   C = l/2 - (w/2) sin(umax), rhat = 1 + kappa (1 + cot umax), q = rhat |rhat|.
 // Returns 0 where it is undefined (umax <= 0, C <= 0, or a hyperbola evaluated past its asymptote).
@@ -37,13 +37,29 @@ double VonMises(double cos_x, double b);
 // Seeliger attenuation (1/4pi) c1 c2 / (c1 + c2) with c = max(0, cos); 0 if either is 0.
 double Seeliger(double cos1, double cos2);
 
+// Orthonormal frame of the fibre at yarn coordinates (u, v) (u along the yarn, v across) for twist
+// psi, in the yarn's local frame (x across, y along, z = normal). With e_x = (1, 0, 0),
+// e_n = (0, sin u, cos u) and e_t = (0, cos u, -sin u):
+//   n = sin v e_x + cos v e_n                                   (yarn surface normal)
+//   t = -sin psi cos v e_x + sin psi sin v e_n + cos psi e_t    (fibre tangent)
+//   b = cos psi cos v e_x - cos psi sin v e_n + sin psi e_t     (completes the frame).
+// N_spec's quadrature writes direction pairs in this frame (docs/btf-synth.md, "Normalization").
+struct FibreFrame {
+  Vec3 n, t, b;
+};
+FibreFrame MakeFibreFrame(double u, double v, double psi);
+
 }  // namespace irawan2012
 
 struct Irawan2012Options {
   double repeat_u = 1, repeat_v = 1;  // weave repeats per uv tile (Mitsuba's repeatU / repeatV)
   bool noise = false;                 // umax noise + intensity variation (off = ground truth)
-  long long nspec_samples = 1 << 20;  // samples for N_spec (rounded up to a square n x n)
+  // Gauss-Legendre order of the N_spec quadrature, 4..64 (docs/btf-synth.md): 16 gives a relative
+  // error of 1e-8 .. 1e-6 on the presets; the cost grows with order^5. The error estimate compares
+  // with a lower order.
+  int nspec_order = 16;
   double tile_mm = 4.0;               // physical size of one uv tile
+  void Check() const;                 // throws btf::Error (usage) naming the bad field
 };
 
 class Irawan2012Model : public SvbrdfModel {
@@ -59,13 +75,21 @@ class Irawan2012Model : public SvbrdfModel {
   // Double-precision RGB value of Eval.
   void EvalRgb(const Vec2& uv, const Vec3& wi, const Vec3& wo, double out[3]) const;
   // g = iv * S_spec * (warpArea + weftArea) / area_type: the specular value before k_s and N_spec
-  // (what Mitsuba accumulates for its normalisation). 0 below the horizon.
+  // (what Mitsuba accumulates for its normalization). 0 below the horizon.
   double SpecularIntegrand(const Vec2& uv, const Vec3& wi, const Vec3& wo) const;
-  // S_spec alone: the band value of irawan-models.md 2.3 (no iv, no area factor).
+  // S_spec alone: the band value of Mitsuba 0.6's irawan plugin (no iv, no area factor).
   double BandValue(const Vec2& uv, const Vec3& wi, const Vec3& wo) const;
 
+  // N_spec = 1 / (pi E[g]) (docs/btf-synth.md), by deterministic quadrature of order
+  // options().nspec_order; 0 when no yarn has a specular term.
   double specular_normalization() const { return nspec_; }
-  double specular_normalization_rel_stderr() const { return nspec_rel_err_; }
+  // Error estimate of N_spec, relative: |N_spec(order) - N_spec(lower order)| / N_spec, the lower
+  // order being order - max(2, order / 4). Conservative (the lower order's own error).
+  double specular_normalization_rel_error() const { return nspec_rel_err_; }
+  // E[g] by the quadrature at Gauss-Legendre order `order` (2..64): N_spec = 1 / (pi E[g]) at
+  // order options().nspec_order; public so that tests can compare orders. Deterministic (the
+  // same bits on any thread count).
+  double SpecularMean(int order) const;
   // 1-based indices of the yarns whose specular term the reference guard w sin(umax) >= l zeroes.
   const std::vector<int>& disabled_yarns() const { return disabled_; }
   const WeavePattern& pattern() const { return pattern_; }
@@ -81,17 +105,19 @@ class Irawan2012Model : public SvbrdfModel {
   };
   struct Local {
     int yarn;            // 0-based
-    double x, y;         // position relative to the segment centre (cells), weft rotated
-    double center_x, center_y;  // segment centre (cells, Mitsuba's flipped-Y frame)
+    double x, y;         // position relative to the segment center (cells), weft rotated
+    double center_x, center_y;  // segment center (cells, Mitsuba's flipped-Y frame)
     double cell_x, cell_y;      // unrotated position X, Y (cells)
   };
   Local Locate(const Vec2& uv) const;
+  Local LocateCell(double cell_x, double cell_y) const;  // from unrotated cell coordinates X, Y
   double Band(const Local& loc, Vec3 wi, Vec3 wo) const;
   // EvalRgb for unit directions above the surface.
   void EvalUnit(const Vec2& uv, const Vec3& wi, const Vec3& wo, double out[3]) const;
   double IntensityVariation(const Local& loc) const;
   double NoisyUmax(const Local& loc, const WeaveYarn& y) const;
   void ComputeNormalization();
+  double SpecularMean(int order, long long* node_count) const;
 
   std::string preset_;
   WeavePattern pattern_;
@@ -99,7 +125,7 @@ class Irawan2012Model : public SvbrdfModel {
   std::vector<YarnCache> cache_;
   std::vector<int> disabled_;
   double nspec_ = 0, nspec_rel_err_ = 0;
-  long long nspec_used_ = 0;
+  long long nspec_nodes_ = 0;  // outer quadrature nodes (u, v) of the order-nspec_order estimate
 };
 
 // Builds the model from a preset name (WeavePresetNames()) or a path to a `.wv` file, with

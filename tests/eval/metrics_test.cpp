@@ -198,7 +198,7 @@ TEST(EvalMetrics, ErrorMapColorsAndColorBar) {
   expect_color(pad + zoom / 2, pad + zoom / 2, hi);                // texel (0, 0)
   expect_color(pad + 2 * zoom + 3, pad + zoom + zoom - 3, mid);    // texel (y 1, x 2)
   expect_color(pad + 4 * zoom - 1, pad + 3 * zoom - 1, lo);        // texel (y 2, x 3)
-  // The colour bar runs through the same map, 0 at the left end, `scale` at the right.
+  // The color bar runs through the same map, 0 at the left end, `scale` at the right.
   const int bar_y = pad + 3 * zoom + 6 + 6;
   expect_color(pad, bar_y, lo);
   expect_color(im.width - pad - 1, bar_y, hi);

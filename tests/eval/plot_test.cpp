@@ -81,7 +81,7 @@ TEST(EvalPlot, FigureHasTheSvgInlineAndTheTextInItsCaption) {
   EXPECT_NE(caption.find("error vs bytes"), std::string::npos);
   EXPECT_NE(caption.find("x: bytes (log scale)"), std::string::npos);
   EXPECT_NE(caption.find("y: rmse (log scale)"), std::string::npos);
-  // Legend: each series' name, its colour and marker (circle; square with a line).
+  // Legend: each series' name, its color and marker (circle; square with a line).
   EXPECT_NE(caption.find("pca-view &lt;c&gt;"), std::string::npos);
   EXPECT_NE(caption.find("color:#d62728\">&#9679;<"), std::string::npos);
   EXPECT_NE(caption.find("color:#1f77b4\">&#8212;&#9632;&#8212;<"), std::string::npos);

@@ -96,7 +96,7 @@ TEST(EvalRender, CodecEvaluatorMatchesDatasetEvaluator) {
 }
 
 TEST(EvalRender, ManyChannelsAndOneChannel) {
-  // A 20-channel (spectral-like) BTF shows its first three channels; a 1-channel BTF is grey.
+  // A 20-channel (spectral-like) BTF shows its first three channels; a 1-channel BTF is gray.
   const Sampling s = Sampling::Bonn81().Subset({0, 1, 2, 3, 4, 5, 6});
   Dataset many(s, s, 2, 2, 20), one(s, s, 2, 2, 1);
   many.info().channel_names.assign(20, "band");
@@ -130,7 +130,7 @@ TEST(EvalRender, ComparisonPanelReportsTheDifference) {
   ASSERT_EQ(panel.width, 3 * 10 + 4 * 8);
   ASSERT_EQ(panel.height, 8 + 22 + 8);
   // The truth (luminance 1 = its 99th percentile) shows at exposure 0.8; the difference, 5 % of
-  // a 10 % full scale, is the middle of the colour map.
+  // a 10 % full scale, is the middle of the color map.
   float mid[3];
   FalseColor(0.5, mid);
   for (int k = 0; k < 3; ++k) {

@@ -1,8 +1,10 @@
-// Irawan 2012 (Mitsuba 0.6 behaviour): curvature, phase function, normalisation, reciprocity,
+// Irawan 2012 (Mitsuba 0.6 behavior): curvature, phase function, normalization, reciprocity,
 // guards, stiff cases and hand-derived values.
 #include "libbtf/synth/irawan2012.h"
 
 #include <gtest/gtest.h>
+
+#include <omp.h>
 
 #include <cmath>
 #include <fstream>
@@ -20,12 +22,13 @@ using irawan2012::Seeliger;
 using irawan2012::SpineRadius;
 using irawan2012::VonMises;
 
-// Cheaper normalisation for tests that do not check it (2^16 samples); tests of N_spec use the default.
-const nlohmann::json kFast = {{"nspec_samples", 65536}};
+// Cheaper normalization for tests that do not check it (quadrature order 8: N_spec to ~1e-2, 100x
+// faster than the default 16); tests of N_spec use the default.
+const nlohmann::json kFast = {{"nspec_order", 8}};
 
 // ---------------------------------------------------------------------------------------------
 // Spine radius: the four branches of the reference (ellipse / circle / parabola / hyperbola,
-// written from reference/irawan-models.md 2.4) as an oracle for our closed form.
+// written from Mitsuba 0.6's irawan plugin) as an oracle for our closed form.
 double BranchRadius(double u, double umax, double kappa, double w, double l) {
   const double rhat = 1 + kappa * (1 + 1 / std::tan(umax));
   const double C = 0.5 * l - 0.5 * w * std::sin(umax);
@@ -45,7 +48,7 @@ double BranchRadius(double u, double umax, double kappa, double w, double l) {
 }
 
 TEST(Irawan2012Curvature, PresetValuesMatchTheReferenceTable) {
-  // reference/irawan-models.md section 3, "Curvature per preset" (6 significant digits printed:
+  // docs/btf-synth.md, "Irawan 2012" presets (6 significant digits printed:
   // relative tolerance 1e-5). (umax deg, kappa, w, l) -> R(0), R(umax).
   struct Row {
     const char* yarn;
@@ -94,7 +97,7 @@ TEST(Irawan2012Curvature, ClosedFormEqualsBranchFormulas) {
   for (double u : {0.0, 0.2, umax}) {
     EXPECT_NEAR(SpineRadius(u, umax, 0, 1, 3), BranchRadius(u, umax, 0, 1, 3), 1e-12);
     const double kp = -1 / (1 + 1 / std::tan(umax));
-    const double ref = BranchRadius(u, umax, kp, 1, 3);  // rhat rounds to ~0: parabola or a neighbour
+    const double ref = BranchRadius(u, umax, kp, 1, 3);  // rhat rounds to ~0: parabola or a neighbor
     EXPECT_NEAR(SpineRadius(u, umax, kp, 1, 3), ref, 1e-9 * ref);
   }
 }
@@ -129,7 +132,7 @@ TEST(Irawan2012Curvature, StiffArguments) {
 }
 
 // ---------------------------------------------------------------------------------------------
-TEST(Irawan2012Phase, VonMisesIsNormalisedOnTheCircle) {
+TEST(Irawan2012Phase, VonMisesIsNormalizedOnTheCircle) {
   // Composite Simpson, 20000 intervals: error < 1e-12 for these smooth periodic integrands (the
   // largest concentration, 1000, has width ~0.03 rad = 100 intervals). Tolerance 1e-9.
   for (double b : {-3.0, 0.0, 0.5, 4.0, 7.3, 40.0, 1000.0}) {
@@ -160,7 +163,7 @@ TEST(Irawan2012Phase, SeeligerAttenuation) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// An independent transcription of reference/irawan-models.md 2.2-2.3 (Mitsuba's eval), used as
+// An independent transcription of Mitsuba 0.6's irawan eval, used as
 // the oracle for BandValue: different structure (explicit cell arithmetic, rotation matrix,
 // branch-formula radius), same equations. Noise off, repeat 1.
 double ReferenceBand(const WeavePattern& p, const Vec2& uv, Vec3 wi, Vec3 wo) {
@@ -257,8 +260,8 @@ TEST(Irawan2012Model, MatchesIndependentTranscriptionOfTheReference) {
 }
 
 TEST(Irawan2012Model, HandDerivedValueAtNormalIncidence) {
-  // polyester_lining, uv at the centre of warp yarn 1 (cell column 0, row 1 from the top:
-  // uv = (0.25, 0.25)), wi = wo = +z. By hand (irawan-models.md 2.3):
+  // polyester_lining, uv at the center of warp yarn 1 (cell column 0, row 1 from the top:
+  // uv = (0.25, 0.25)), wi = wo = +z. By hand (the band formula of docs/btf-synth.md):
   //   h = z, u* = 0, v = 0, n = z; umax_s = (1 - 0.5) * 22 deg = 11 deg;
   //   rhat = 1 - 0.7 (1 + cot 11 deg) = -3.301274..., q = -rhat^2;
   //   R(0) = C sqrt(cot^2 11 + q), C = 0.5 - 0.5 sin 11 deg;
@@ -303,7 +306,7 @@ TEST(Irawan2012Model, WeftRotationMapsWarpHighlightGeometry) {
     yarn { type = weft, psi = 25, umax = 30, kappa = 0.3, width = 1, length = 1, centerU = 0.25, centerV = 0.75 },
     yarn { type = weft, psi = 25, umax = 30, kappa = 0.3, width = 1, length = 1, centerU = 0.75, centerV = 0.25 } })";
   Irawan2012Options o;
-  o.nspec_samples = 4096;
+  o.nspec_order = 8;
   Irawan2012Model m("sym", ParseWeavePattern(text, "sym"), o);
   std::mt19937_64 rng(3);
   std::uniform_real_distribution<double> U(-0.49, 0.49);
@@ -311,9 +314,9 @@ TEST(Irawan2012Model, WeftRotationMapsWarpHighlightGeometry) {
   for (int k = 0; k < 2000; ++k) {
     const Vec3 wi = RandomUpper(rng), wo = RandomUpper(rng);
     const double dx = U(rng) / 2, dy = U(rng) / 2;  // offset inside the cell (tile units)
-    // Warp yarn 1: centre (0.25, 0.25), local (x, y) = (dx, dy) * 2 cells.
+    // Warp yarn 1: center (0.25, 0.25), local (x, y) = (dx, dy) * 2 cells.
     const double warp = m.BandValue(Vec2(0.25 + dx, 0.25 + dy), wi, wo);
-    // Weft yarn 3 centre (0.25, 0.75): the weft-local point (x', y') = (-y, x) equals the warp-local
+    // Weft yarn 3 center (0.25, 0.75): the weft-local point (x', y') = (-y, x) equals the warp-local
     // (dx, dy) when (x, y) = (dy, -dx); directions turned by -90 deg so that rotating back gives wi.
     const Vec3 wi_r(wi.y(), -wi.x(), wi.z()), wo_r(wo.y(), -wo.x(), wo.z());
     const double weft = m.BandValue(Vec2(0.25 + dy, 0.75 - dx), wi_r, wo_r);
@@ -366,8 +369,10 @@ std::pair<double, double> SpecularAlbedo(const Irawan2012Model& m, int n, std::u
 
 TEST(Irawan2012Model, SpecularLobeAlbedoEqualsKs) {
   // N_spec makes the cosine-weighted, uv-averaged bihemispherical albedo of the specular lobe
-  // equal k_s (= 1 here). Checked with an independent estimator (400k samples): tolerance 4
-  // standard errors of that estimate plus 4 times N_spec's own stated error bound.
+  // equal k_s (= 1 here). Checked with an independent black-box estimator (400k samples of the
+  // model's own integrand): tolerance 4 standard errors of that estimate plus 4 times N_spec's own
+  // error estimate. (This checks the quadrature's formulation at the percent level; the tests
+  // below check it pointwise and its convergence.)
   // Six presets covering staple and filament yarns, smoothing, every spine branch, a guard-disabled
   // yarn type (twill) and per-yarn alpha/beta/ss (crepe).
   for (const char* name : {"cotton_denim", "polyester_lining", "silk_charmeuse", "silk_shantung", "cotton_twill",
@@ -375,22 +380,336 @@ TEST(Irawan2012Model, SpecularLobeAlbedoEqualsKs) {
     SCOPED_TRACE(name);
     const auto model = MakeIrawan2012(name);
     ASSERT_GT(model->specular_normalization(), 0);
-    EXPECT_EQ(model->options().nspec_samples, 1 << 20);
-    EXPECT_LT(model->specular_normalization_rel_stderr(), 0.01);
+    EXPECT_EQ(model->options().nspec_order, 16);
+    EXPECT_LT(model->specular_normalization_rel_error(), 1e-4);
     const auto [albedo, se] = SpecularAlbedo(*model, 400000, 99);
     EXPECT_LT(se, 0.03) << "estimator too weak to test anything";
-    EXPECT_NEAR(albedo, 1.0, 4 * se + 4 * model->specular_normalization_rel_stderr()) << "se " << se;
+    EXPECT_NEAR(albedo, 1.0, 4 * se + 4 * model->specular_normalization_rel_error()) << "se " << se;
   }
 }
 
-TEST(Irawan2012Model, NormalisationIsDeterministicAndRecorded) {
+TEST(Irawan2012Model, NormalizationIsDeterministicAndRecorded) {
   const auto a = MakeIrawan2012("silk_shantung", kFast);
   const auto b = MakeIrawan2012("silk_shantung", kFast);
   EXPECT_EQ(a->specular_normalization(), b->specular_normalization());
+  // The same bits on one thread as on several (values summed in a fixed order).
+  const int threads = omp_get_max_threads();
+  omp_set_num_threads(1);
+  const auto one = MakeIrawan2012("silk_shantung", kFast);
+  omp_set_num_threads(std::max(2, threads));
+  const auto many = MakeIrawan2012("silk_shantung", kFast);
+  omp_set_num_threads(threads);
+  EXPECT_EQ(one->specular_normalization(), many->specular_normalization());
+  EXPECT_EQ(one->SpecularMean(9), many->SpecularMean(9));
+  EXPECT_EQ(a->specular_normalization(), 1 / (kPi * a->SpecularMean(8)));
   const auto d = a->Describe();
   EXPECT_EQ(d["specular_normalization"]["value"].get<double>(), a->specular_normalization());
-  EXPECT_EQ(d["specular_normalization"]["samples"].get<long long>(), 65536);
+  EXPECT_EQ(d["specular_normalization"]["order"].get<int>(), 8);
+  EXPECT_EQ(d["specular_normalization"]["error_estimate_order"].get<int>(), 6);
+  EXPECT_EQ(d["specular_normalization"]["relative_error_estimate"].get<double>(), a->specular_normalization_rel_error());
+  EXPECT_GT(d["specular_normalization"]["outer_nodes"].get<long long>(), 100);
   EXPECT_EQ(d["noise"].get<bool>(), false);
+}
+
+// ---------------------------------------------------------------------------------------------
+// N_spec quadrature (docs/btf-synth.md, "Normalization N_spec"). The quadrature integrates, per
+// yarn segment, over the highlight point (u, v) and a direction pair written in the fibre frame
+// there: wi = sin(theta) t + cos(theta) (cos(phi_i) n + sin(phi_i) b), wo likewise with -theta and
+// phi_o, h = (wi + wo) / |wi + wo| at angle a = (phi_i + phi_o) / 2 from n towards b. The three
+// tests below check that reformulation against the model itself, pointwise: (1) at every point of
+// the quadrature's domain the model's band value is the integrand the quadrature uses, (2) every
+// highlight the model produces lies in that domain, (3) the Jacobian that cancels the model's
+// geometry factor G. The convergence tests after them check the quadrature.
+
+using irawan2012::FibreFrame;
+using irawan2012::MakeFibreFrame;
+
+Vec3 PairDirection(const FibreFrame& f, double theta, double phi) {
+  return std::sin(theta) * f.t + std::cos(theta) * (std::cos(phi) * f.n + std::sin(phi) * f.b);
+}
+
+// uv of the yarn-local point (x, y) of yarn `yarn` (tile 0, repeat 1), and the global directions
+// of local ones; false if the point leaves the tile or lies in another yarn's cell.
+bool LocalToUv(const Irawan2012Model& m, int yarn, double x, double y, Vec3* wi, Vec3* wo, Vec2* uv) {
+  const WeavePattern& p = m.pattern();
+  const WeaveYarn& yn = p.yarns[static_cast<std::size_t>(yarn)];
+  const double W = p.tile_width, H = p.tile_height, cx = yn.center_u * W, cy = (1 - yn.center_v) * H;
+  double X = cx + x, Y = cy - y;
+  if (yn.type == WeaveYarn::Type::kWeft) {  // local (x, y) = (-y_l, x_l), directions turned by +90 deg
+    X = cx + y;
+    Y = cy + x;
+    *wi = Vec3(wi->y(), -wi->x(), wi->z());
+    *wo = Vec3(wo->y(), -wo->x(), wo->z());
+  }
+  if (X < 0 || X >= W || Y < 0 || Y >= H) return false;
+  *uv = Vec2(X / W, 1 - Y / H);
+  return m.YarnIndexAt(*uv) == yarn + 1;
+}
+
+TEST(Irawan2012Normalization, FibreFrameIsOrthonormal) {
+  std::mt19937_64 rng(21);
+  std::uniform_real_distribution<double> U(-1.5, 1.5);
+  for (int k = 0; k < 1000; ++k) {
+    const FibreFrame f = MakeFibreFrame(U(rng), U(rng), U(rng));
+    EXPECT_NEAR(f.n.norm(), 1, 1e-14);
+    EXPECT_NEAR(f.t.norm(), 1, 1e-14);
+    EXPECT_NEAR(f.b.norm(), 1, 1e-14);
+    EXPECT_NEAR(f.n.dot(f.t), 0, 1e-14);
+    EXPECT_NEAR(f.n.dot(f.b), 0, 1e-14);
+    EXPECT_NEAR(f.t.dot(f.b), 0, 1e-14);
+  }
+  // Filament (psi = 0): n and t as in the model (n = (sin v, sin u cos v, cos u cos v), t = (0, cos u, -sin u)).
+  const FibreFrame f = MakeFibreFrame(0.3, -0.7, 0);
+  EXPECT_NEAR((f.n - Vec3(std::sin(-0.7), std::sin(0.3) * std::cos(-0.7), std::cos(0.3) * std::cos(-0.7))).norm(), 0, 1e-15);
+  EXPECT_NEAR((f.t - Vec3(0, std::cos(0.3), -std::sin(0.3))).norm(), 0, 1e-15);
+}
+
+TEST(Irawan2012Normalization, ModelEqualsTheQuadratureIntegrandOnItsDomain) {
+  // Random points of the domain: (u, v) on the yarn, theta, phi_i, phi_o in (-pi/2, pi/2), both
+  // directions above the surface. The model, evaluated at the band center of that highlight, must
+  // give  G fc A * (domain factor)  with G = (w/2) (R + (w/2) cos v) / (2 cos(theta_d) J), J =
+  // cos(a + v) (filament) or cos(a) |sin psi| (staple): the factor the Jacobian (test below)
+  // cancels. Staple points with v + atan(cos(psi) tan(a)) <= -pi/2 must give 0 (the reference's
+  // v* comes out 2 pi too large there). Relative tolerance 1e-6 (cos(theta_d) from |wi + wo|).
+  std::mt19937_64 rng(22);
+  std::uniform_real_distribution<double> U(0, 1);
+  for (const auto& name : WeavePresetNames()) {
+    SCOPED_TRACE(name);
+    const auto m = MakeIrawan2012(name, kFast);
+    const WeavePattern& p = m->pattern();
+    int tested = 0, cut = 0;
+    for (std::size_t yi = 0; yi < p.yarns.size(); ++yi) {
+      const WeaveYarn& y = p.yarns[yi];
+      if (y.width * std::sin(y.umax) >= y.length) continue;  // guard: no highlight
+      const double w = y.width, l = y.length, a = 0.5 * w, hw = p.h_width, ss = p.SsOf(y);
+      const bool staple = y.psi != 0;
+      for (int k = 0; k < 1500; ++k) {
+        double u = y.umax * (2 * U(rng) - 1), v = kPi * (U(rng) - 0.5);
+        double th = kPi * (U(rng) - 0.5), pi_ = kPi * (U(rng) - 0.5), po = kPi * (U(rng) - 0.5);
+        if (staple && k >= 1400) {  // the cut is rare (0.1 % of denim's pairs): search it (v < 0, a < 0)
+          for (int tries = 0; tries < 100000; ++tries) {
+            u = y.umax * (2 * U(rng) - 1);
+            v = -0.5 * kPi * U(rng);
+            th = kPi * (U(rng) - 0.5);
+            pi_ = -0.5 * kPi * U(rng);
+            po = -0.5 * kPi * U(rng);
+            const FibreFrame g = MakeFibreFrame(u, v, y.psi);
+            if (PairDirection(g, th, pi_).z() > 1e-3 && PairDirection(g, -th, po).z() > 1e-3 &&
+                v + std::atan(std::cos(y.psi) * std::tan(0.5 * (pi_ + po))) <= -kPi / 2)
+              break;
+          }
+        }
+        const FibreFrame f = MakeFibreFrame(u, v, y.psi);
+        Vec3 wi = PairDirection(f, th, pi_), wo = PairDirection(f, -th, po);
+        if (wi.z() < 1e-3 || wo.z() < 1e-3) continue;
+        const double ah = 0.5 * (pi_ + po);
+        const double cos_d = 0.5 * (wi + wo).norm();
+        const double fc = p.AlphaOf(y) + VonMises(-wi.dot(wo), p.BetaOf(y));
+        const double A = Seeliger(std::cos(th) * std::cos(pi_), std::cos(th) * std::cos(po));
+        double x, yy, expected;
+        if (!staple) {  // band along y, centered at y*(u); x from v
+          const double ums = (1 - ss) * y.umax, dy = l * hw;
+          const double R = BranchRadius(std::min(std::abs(u), ums), ums, y.kappa, w, l);
+          double sm = 1;
+          if (ss > 0) {
+            const double s = std::clamp((std::abs(u) - ums) / (ss * y.umax), 0.0, 1.0);
+            sm = 1 - s * s * (3 - 2 * s);
+          }
+          x = v * w / kPi;
+          yy = std::clamp(u * 0.5 * l / y.umax, -0.5 * (l - dy), 0.5 * (l - dy));
+          expected = a * (R + a * std::cos(v)) / (2 * cos_d * std::cos(ah + v)) * fc * A * sm * kPi * l / dy;
+        } else {  // band along x, centered at x*(v); y from u
+          const double dx = w * hw;
+          const double R = BranchRadius(std::abs(u), y.umax, y.kappa, w, l);
+          x = std::clamp(v * w / kPi, -0.5 * (w - dx), 0.5 * (w - dx));
+          yy = u * 0.5 * l / y.umax;
+          const bool accepted = v + std::atan(std::cos(y.psi) * std::tan(ah)) > -kPi / 2;
+          expected = accepted ? a * (R + a * std::cos(v)) / (2 * cos_d * std::cos(ah) * std::abs(std::sin(y.psi))) * fc * A *
+                                    2 * w * y.umax / dx
+                              : 0.0;
+        }
+        Vec2 uv;
+        if (!LocalToUv(*m, static_cast<int>(yi), x, yy, &wi, &wo, &uv)) continue;
+        cut += staple && expected == 0;
+        const double got = m->BandValue(uv, wi, wo);
+        EXPECT_NEAR(got, expected, 1e-6 * expected + 1e-300)
+            << "yarn " << yi + 1 << " u " << u << " v " << v << " theta " << th << " phi " << pi_ << " " << po;
+        ++tested;
+      }
+    }
+    if (name != "velvet") {
+      EXPECT_GT(tested, 500);
+    }
+    if (name == "cotton_denim" || name == "wool_gabardine") {
+      EXPECT_GT(cut, 50) << "the staple cut was not exercised";
+    }
+  }
+}
+
+TEST(Irawan2012Normalization, EveryHighlightLiesInTheQuadratureDomain) {
+  // Random (uv, wi, wo) where the model has a highlight, all presets: the highlight point (u, v)
+  // (filament: u = atan(h_y / h_z), v = pi x / w; staple: u = 2 umax y / l, v = v* of the
+  // reference) and the pair's (theta, phi_i, phi_o) in the fibre frame there must lie in the
+  // quadrature's domain: h . t = 0, wo . t = -wi . t, |phi| < pi/2, |u| < umax (filament),
+  // |v| < pi/2 and the staple cut (above). So the quadrature misses no part of the integrand.
+  std::mt19937_64 rng(23);
+  std::uniform_real_distribution<double> U(0, 1);
+  for (const auto& name : WeavePresetNames()) {
+    SCOPED_TRACE(name);
+    const auto m = MakeIrawan2012(name, kFast);
+    const WeavePattern& p = m->pattern();
+    int hits = 0;
+    for (int k = 0; k < 20000; ++k) {
+      const Vec2 uv(U(rng), U(rng));
+      const Vec3 wi_g = RandomUpper(rng, DegToRad(89)), wo_g = RandomUpper(rng, DegToRad(89));
+      if (!(m->BandValue(uv, wi_g, wo_g) > 0)) continue;
+      ++hits;
+      // Local point and directions (as the transcription ReferenceBand above).
+      const double X = uv.x() * p.tile_width, Y = (1 - uv.y()) * p.tile_height;
+      const WeaveYarn& y = p.yarns[static_cast<std::size_t>(m->YarnIndexAt(uv) - 1)];
+      double x = X - y.center_u * p.tile_width, yl = -(Y - (1 - y.center_v) * p.tile_height);
+      Vec3 wi = wi_g, wo = wo_g;
+      if (y.type == WeaveYarn::Type::kWeft) {
+        const double t = x;
+        x = -yl;
+        yl = t;
+        wi = Vec3(-wi.y(), wi.x(), wi.z());
+        wo = Vec3(-wo.y(), wo.x(), wo.z());
+      }
+      const Vec3 h = (wi + wo).normalized();
+      double u, v;
+      if (y.psi == 0) {
+        u = std::atan(h.y() / h.z());
+        v = kPi * x / y.width;
+        EXPECT_LT(std::abs(u), y.umax);
+      } else {
+        u = 2 * y.umax * yl / y.length;
+        const double B = h.y() * std::sin(u) + h.z() * std::cos(u);
+        const double D = (h.y() * std::cos(u) - h.z() * std::sin(u)) / (std::hypot(h.x(), B) * std::tan(y.psi));
+        v = std::atan2(-B, h.x()) + std::acos(D);
+        EXPECT_LT(std::abs(v), kPi / 2);
+      }
+      const FibreFrame f = MakeFibreFrame(u, v, y.psi);
+      EXPECT_NEAR(f.t.dot(h), 0, 1e-9);
+      const double st = wi.dot(f.t);
+      EXPECT_NEAR(wo.dot(f.t), -st, 1e-9);
+      const double phi_i = std::atan2(wi.dot(f.b), wi.dot(f.n)), phi_o = std::atan2(wo.dot(f.b), wo.dot(f.n));
+      EXPECT_LT(std::abs(phi_i), kPi / 2);
+      EXPECT_LT(std::abs(phi_o), kPi / 2);
+      EXPECT_NEAR((PairDirection(f, std::asin(st), phi_i) - wi).norm(), 0, 1e-9);
+      EXPECT_NEAR((PairDirection(f, -std::asin(st), phi_o) - wo).norm(), 0, 1e-9);
+      if (y.psi != 0 && v < 0) {
+        EXPECT_GT(phi_i + phi_o, 2 * std::atan(1 / (std::tan(v) * std::cos(y.psi))));
+      }
+    }
+    if (name != "velvet") {
+      EXPECT_GT(hits, 100);
+    }
+  }
+}
+
+TEST(Irawan2012Normalization, JacobianOfTheDirectionParameterization) {
+  // |d(wi, wo) / d(s, theta, phi_i, phi_o)| (solid angle x solid angle) by central differences,
+  // against the closed form the quadrature uses: 2 cos(theta_d) J cos(theta) with s = u, J =
+  // cos(a + v) at fixed v (filament) and s = v, J = cos(a) |sin psi| at fixed u (staple).
+  // Differences with step 1e-5: relative accuracy ~1e-9; tolerance 1e-6.
+  std::mt19937_64 rng(24);
+  std::uniform_real_distribution<double> U(-1, 1);
+  auto angles = [](const Vec3& w, double ref_phi) {
+    double phi = std::atan2(w.y(), w.x());
+    phi += 2 * kPi * std::round((ref_phi - phi) / (2 * kPi));  // no jump across the branch cut
+    return std::array<double, 2>{std::acos(std::clamp(w.z(), -1.0, 1.0)), phi};
+  };
+  int tested = 0;
+  for (int k = 0; k < 400; ++k) {
+    const bool staple = k % 2;
+    const double psi = staple ? 0.7 * U(rng) : 0.0;
+    if (staple && std::abs(psi) < 0.1) continue;
+    const double x0[5] = {0.6 * U(rng), 1.2 * U(rng), 1.2 * U(rng), 1.3 * U(rng), 1.3 * U(rng)};  // u, v, theta, phi_i, phi_o
+    auto dirs = [&](const double* x) {
+      const FibreFrame f = MakeFibreFrame(x[0], x[1], psi);
+      return std::pair<Vec3, Vec3>{PairDirection(f, x[2], x[3]), PairDirection(f, -x[2], x[4])};
+    };
+    const auto [wi, wo] = dirs(x0);
+    if (std::abs(wi.z()) > 0.98 || std::abs(wo.z()) > 0.98) continue;  // keep away from the poles of (theta, phi)
+    const auto ai = angles(wi, 0), ao = angles(wo, 0);
+    // Columns: s (u for the filament, v for the staple), theta, phi_i, phi_o.
+    const int vars[4] = {staple ? 1 : 0, 2, 3, 4};
+    Eigen::Matrix4d J;
+    const double step = 1e-5;
+    for (int c = 0; c < 4; ++c) {
+      double xp[5], xm[5];
+      std::copy(x0, x0 + 5, xp);
+      std::copy(x0, x0 + 5, xm);
+      xp[vars[c]] += step;
+      xm[vars[c]] -= step;
+      const auto [wip, wop] = dirs(xp);
+      const auto [wim, wom] = dirs(xm);
+      const auto aip = angles(wip, ai[1]), aop = angles(wop, ao[1]), aim = angles(wim, ai[1]), aom = angles(wom, ao[1]);
+      J.col(c) << (aip[0] - aim[0]) / (2 * step), (aip[1] - aim[1]) / (2 * step), (aop[0] - aom[0]) / (2 * step),
+          (aop[1] - aom[1]) / (2 * step);
+    }
+    const double numeric = std::abs(J.determinant()) * std::sin(ai[0]) * std::sin(ao[0]);
+    const double a = 0.5 * (x0[3] + x0[4]), cos_d = 0.5 * (wi + wo).norm();
+    const double jac = staple ? std::cos(a) * std::abs(std::sin(psi)) : std::cos(a + x0[1]);
+    const double expected = 2 * cos_d * std::abs(jac) * std::cos(x0[2]);
+    EXPECT_NEAR(numeric, expected, 1e-6 * expected) << "staple " << staple << " k " << k;
+    ++tested;
+  }
+  EXPECT_GT(tested, 200);
+}
+
+TEST(Irawan2012Normalization, ErrorEstimateBelow1e4ForEveryPreset) {
+  // Every preset at the default order 16: the error estimate |N(16) - N(12)| / N(16) is below
+  // 1e-4 (the issue's target; the actual error is ~1e-6 or less, see the slow test against
+  // order 32), and it is not vacuous (> 0).
+  for (const auto& name : WeavePresetNames()) {
+    SCOPED_TRACE(name);
+    const auto m = MakeIrawan2012(name);
+    if (name == "velvet") {
+      EXPECT_EQ(m->specular_normalization(), 0.0);
+      continue;
+    }
+    EXPECT_GT(m->specular_normalization(), 0);
+    EXPECT_GT(m->specular_normalization_rel_error(), 0);
+    EXPECT_LT(m->specular_normalization_rel_error(), 1e-4);
+  }
+}
+
+TEST(Irawan2012Normalization, ConvergedAtTheDefaultOrder) {
+  // Fast version of the slow test's check: three presets that exercise the three hard parts (staple
+  // cut and many segments: cotton_denim; hyperbolic spine near its asymptote with smoothing:
+  // polyester_lining; beta = 40, a very peaked phase function: silk_shot). N(16) against N(20),
+  // a different set of nodes everywhere: |difference| / N <= 1e-5 (observed <= 5e-7), and the
+  // error estimate covers the difference.
+  for (const char* name : {"cotton_denim", "polyester_lining", "silk_shot"}) {
+    SCOPED_TRACE(name);
+    const auto m = MakeIrawan2012(name);
+    const double n20 = 1 / (kPi * m->SpecularMean(20));
+    const double diff = std::abs(m->specular_normalization() / n20 - 1);
+    EXPECT_LT(diff, 1e-5);
+    EXPECT_GE(m->specular_normalization_rel_error(), diff);
+  }
+}
+
+TEST(Irawan2012Normalization, OptionsCheck) {
+  Irawan2012Options o;
+  o.Check();  // the documented defaults are valid
+  EXPECT_EQ(o.nspec_order, 16);
+  for (int bad : {3, 65}) {
+    o.nspec_order = bad;
+    EXPECT_THROW(o.Check(), Error);
+  }
+  o = Irawan2012Options{};
+  o.repeat_u = 0;
+  EXPECT_THROW(o.Check(), Error);
+  o = Irawan2012Options{};
+  o.tile_mm = -1;
+  EXPECT_THROW(o.Check(), Error);
+  // The model constructor checks them too.
+  o = Irawan2012Options{};
+  o.nspec_order = 2;
+  EXPECT_THROW(Irawan2012Model("x", WeavePreset("polyester_lining"), o), Error);
 }
 
 TEST(Irawan2012Model, GuardDisablesTwillWeftAndVelvet) {
@@ -442,7 +761,7 @@ TEST(Irawan2012Model, StiffCasesStayFiniteAndNonNegative) {
     for (double p : {0.0, 45.0, 90.0, 135.0, 180.0, 270.0, 333.0}) dirs.push_back(DirectionFromAngles(DegToRad(t), DegToRad(p)));
   for (const auto& name : WeavePresetNames()) {
     SCOPED_TRACE(name);
-    const auto model = MakeIrawan2012(name, nlohmann::json{{"nspec_samples", 4096}, {"noise", true}});
+    const auto model = MakeIrawan2012(name, nlohmann::json{{"nspec_order", 6}, {"noise", true}});
     for (int iu = 0; iu <= 16; ++iu)
       for (int iv = 0; iv <= 16; ++iv) {
         const Vec2 uv(iu / 16.0, iv / 16.0);
@@ -479,7 +798,7 @@ TEST(Irawan2012Model, ExtremeYarnParameters) {
             psi, umax, kappa);
         SCOPED_TRACE(text);
         Irawan2012Options o;
-        o.nspec_samples = 4096;
+        o.nspec_order = 8;
         Irawan2012Model m("x", ParseWeavePattern(text, "x"), o);
         EXPECT_TRUE(std::isfinite(m.specular_normalization()));
         std::mt19937_64 rng(1);
@@ -496,7 +815,7 @@ TEST(Irawan2012Model, ParameterOverrides) {
   const auto base = MakeIrawan2012("cotton_denim", kFast);
   // repeat_u = 2, repeat_v = 3: the value at uv equals the repeat-1 value at the folded position
   // (u' = frac(2u), 1 - v' = frac(3 (1 - v)) because rows run from the top).
-  const auto rep = MakeIrawan2012("cotton_denim", {{"repeat_u", 2}, {"repeat_v", 3}, {"nspec_samples", 65536}});
+  const auto rep = MakeIrawan2012("cotton_denim", {{"repeat_u", 2}, {"repeat_v", 3}, {"nspec_order", 8}});
   std::mt19937_64 rng(4);
   std::uniform_real_distribution<double> U(0, 1);
   for (int k = 0; k < 500; ++k) {
@@ -507,8 +826,8 @@ TEST(Irawan2012Model, ParameterOverrides) {
     const double a = rep->BandValue(uv, wi, wo), b = base->BandValue(Vec2(fu, 1 - fy), wi, wo);
     EXPECT_NEAR(a, b, 1e-9 * b + 1e-12);
   }
-  // Colour overrides: kd everywhere, then ks of the weft only.
-  const auto col = MakeIrawan2012("cotton_denim", {{"kd", {0.2, 0.3, 0.4}}, {"weft_ks", 0.0}, {"nspec_samples", 4096}});
+  // Color overrides: kd everywhere, then ks of the weft only.
+  const auto col = MakeIrawan2012("cotton_denim", {{"kd", {0.2, 0.3, 0.4}}, {"weft_ks", 0.0}, {"nspec_order", 8}});
   for (const auto& y : col->pattern().yarns) {
     EXPECT_DOUBLE_EQ(y.kd[2], 0.4);
     EXPECT_DOUBLE_EQ(y.ks[0], y.type == WeaveYarn::Type::kWeft ? 0.0 : 0.08);
@@ -516,7 +835,9 @@ TEST(Irawan2012Model, ParameterOverrides) {
   // Bad overrides name the field.
   for (const auto& [params, field] : std::vector<std::pair<nlohmann::json, std::string>>{
            {{{"repeat_u", 0}}, "repeat_u"}, {{{"kd", "red"}}, "kd"}, {{{"noise", 1}}, "noise"},
-           {{{"colour", 1}}, "colour"}, {{{"nspec_samples", 10}}, "nspec_samples"}, {{{"warp_ks", {1, 2}}}, "warp_ks"}}) {
+           {{{"colour", 1}}, "colour"}, {{{"nspec_order", 3}}, "nspec_order"}, {{{"nspec_order", 8.5}}, "nspec_order"},
+           {{{"nspec_samples", 65536}}, "nspec_samples"},  // the former Monte Carlo count: now unknown
+           {{{"warp_ks", {1, 2}}}, "warp_ks"}}) {
     try {
       MakeIrawan2012("cotton_denim", params);
       ADD_FAILURE() << params.dump();
@@ -543,10 +864,10 @@ TEST(Irawan2012Model, PresetMayBeAWvFile) {
 
 TEST(Irawan2012Model, NoiseIsDeterministicAndVariesTheHighlight) {
   // With noise on: the same values from two instances, different values from noise off at some
-  // points, and the albedo normalisation still holds (N_spec includes the variation).
+  // points, and the albedo normalization still holds (N_spec includes the variation).
   const auto off = MakeIrawan2012("silk_shantung", kFast);  // period 500 -> umax noise
-  const auto on1 = MakeIrawan2012("silk_shantung", {{"noise", true}, {"nspec_samples", 65536}});
-  const auto on2 = MakeIrawan2012("silk_shantung", {{"noise", true}, {"nspec_samples", 65536}});
+  const auto on1 = MakeIrawan2012("silk_shantung", {{"noise", true}, {"nspec_order", 8}});
+  const auto on2 = MakeIrawan2012("silk_shantung", {{"noise", true}, {"nspec_order", 8}});
   std::mt19937_64 rng(8);
   std::uniform_real_distribution<double> U(0, 1);
   int differ = 0;
@@ -560,7 +881,7 @@ TEST(Irawan2012Model, NoiseIsDeterministicAndVariesTheHighlight) {
   EXPECT_GT(differ, 20);
   const auto denim = MakeIrawan2012("cotton_denim", {{"noise", true}});  // fineness 3 -> intensity variation
   const auto [albedo, se] = SpecularAlbedo(*denim, 400000, 5);
-  EXPECT_NEAR(albedo, 1.0, 4 * se + 4 * denim->specular_normalization_rel_stderr());
+  EXPECT_NEAR(albedo, 1.0, 4 * se + 4 * denim->specular_normalization_rel_error());
 }
 
 }  // namespace
