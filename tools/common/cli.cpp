@@ -142,7 +142,7 @@ nlohmann::json EffectiveOptions(const CLI::App& app) {
     }
     if (o->count() > 0) {
       const auto& r = o->results();
-      if (r.size() == 1) {
+      if (r.size() == 1 && o->get_expected_max() <= 1) {
         j[key] = ValueJson(r.front());
       } else {
         nlohmann::json a = nlohmann::json::array();
