@@ -308,9 +308,9 @@ std::vector<PhotoTruth> ReadTruth(const std::filesystem::path& path) {
     const Node p = ps.At(i);
     PhotoTruth t;
     t.file = p["file"].String();
-    t.plate_to_image = p["plate_to_image"].Matrix3();
-    t.rotation = p["rotation"].Matrix3();
-    t.translation = p["translation"].Vector3();
+    t.image_from_plate = p["plate_to_image"].Matrix3();
+    t.camera_from_plate_rotation = p["rotation"].Matrix3();
+    t.camera_from_plate_translation = p["translation"].Vector3();
     const Node ms = p["markers"];
     const std::size_t nm = ms.ArraySize();
     for (std::size_t k = 0; k < nm; ++k) {
@@ -342,9 +342,9 @@ void WriteTruth(const std::filesystem::path& path, const std::vector<PhotoTruth>
       jm.push_back(json{{"id", id}, {"corners_px", c}});
     }
     ps.push_back(json{{"file", t.file},
-                      {"plate_to_image", ToJson(t.plate_to_image)},
-                      {"rotation", ToJson(t.rotation)},
-                      {"translation", ToJson(t.translation)},
+                      {"plate_to_image", ToJson(t.image_from_plate)},
+                      {"rotation", ToJson(t.camera_from_plate_rotation)},
+                      {"translation", ToJson(t.camera_from_plate_translation)},
                       {"markers", jm}});
   }
   j["photos"] = ps;

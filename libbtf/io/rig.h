@@ -72,9 +72,9 @@ struct Manifest {
 
 struct PhotoTruth {
   std::string file;
-  Eigen::Matrix3d plate_to_image = Eigen::Matrix3d::Identity();  // homography, material surface z = 0 -> pixels
-  Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();        // camera_from_plate
-  Vec3 translation = Vec3::Zero();                               // camera_from_plate, mm
+  Eigen::Matrix3d image_from_plate = Eigen::Matrix3d::Identity();  // homography, material surface z = 0 -> pixels
+  Eigen::Matrix3d camera_from_plate_rotation = Eigen::Matrix3d::Identity();        // camera_from_plate
+  Vec3 camera_from_plate_translation = Vec3::Zero();                               // camera_from_plate, mm
   std::map<int, std::array<Vec2, 4>> marker_corners_px;          // visible markers only
 };
 

@@ -20,12 +20,12 @@ void GeometryOptions::Check() const {
 
 bool PhotoGeometry::Project(const Vec3& p, Vec2* px) const {
   if (!has_pose) {
-    const Vec3 h = surface_homography * Vec3(p.x(), p.y(), 1.0);
+    const Vec3 h = image_from_plate * Vec3(p.x(), p.y(), 1.0);
     if (!(h.z() > 0)) return false;
     *px = h.head<2>() / h.z();
     return true;
   }
-  return ProjectToPixel(camera, rotation, translation, p, px);
+  return ProjectToPixel(camera, camera_from_plate_rotation, camera_from_plate_translation, p, px);
 }
 
 PhotoGeometry EstimateGeometry(const Board& board, const std::vector<TagDetection>& detections,
@@ -128,9 +128,9 @@ PhotoGeometry EstimateGeometry(const Board& board, const std::vector<TagDetectio
     cv::solvePnPRefineLM(in3, in_px, K, dist, rvec, tvec);
     cv::Mat Rm;
     cv::Rodrigues(rvec, Rm);
-    cv::cv2eigen(Rm, g.rotation);
-    g.translation = Vec3(tvec.at<double>(0), tvec.at<double>(1), tvec.at<double>(2));
-    g.surface_homography = PlaneHomography(g.camera, g.rotation, g.translation, 0.0);
+    cv::cv2eigen(Rm, g.camera_from_plate_rotation);
+    g.camera_from_plate_translation = Vec3(tvec.at<double>(0), tvec.at<double>(1), tvec.at<double>(2));
+    g.image_from_plate = PlaneHomography(g.camera, g.camera_from_plate_rotation, g.camera_from_plate_translation, 0.0);
     double ss = 0;
     for (std::size_t i = 0; i < in3.size(); ++i) {
       Vec2 p;
@@ -146,8 +146,8 @@ PhotoGeometry EstimateGeometry(const Board& board, const std::vector<TagDetectio
     // Least squares + LM on the inliers (method 0).
     cv::Mat H = cv::findHomography(in_xy, in_ideal, 0);
     if (H.empty()) ThrowBadInput("degenerate marker layout: the homography refit failed");
-    cv::cv2eigen(H, g.surface_homography);
-    g.surface_homography /= g.surface_homography(2, 2);
+    cv::cv2eigen(H, g.image_from_plate);
+    g.image_from_plate /= g.image_from_plate(2, 2);
     double ss = 0;
     for (std::size_t i = 0; i < in_xy.size(); ++i) {
       Vec2 p;
@@ -156,7 +156,7 @@ PhotoGeometry EstimateGeometry(const Board& board, const std::vector<TagDetectio
     }
     g.rms_px = std::sqrt(ss / static_cast<double>(in_xy.size()));
   }
-  if (!g.surface_homography.allFinite() || std::abs(g.surface_homography.determinant()) < 1e-12)
+  if (!g.image_from_plate.allFinite() || std::abs(g.image_from_plate.determinant()) < 1e-12)
     ThrowBadInput("degenerate homography (singular or not finite)");
   if (!(g.rms_px <= options.max_rms_px))
     ThrowBadInput("reprojection RMS {:.3f} px exceeds the limit {} px: markers misdetected or the board does not match",

@@ -29,9 +29,9 @@ struct GeometryOptions {
 struct PhotoGeometry {
   bool has_pose = false;
   CameraModel camera;                                             // used when has_pose
-  Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();         // camera_from_plate
-  Vec3 translation = Vec3::Zero();                                // camera_from_plate, mm
-  Eigen::Matrix3d surface_homography = Eigen::Matrix3d::Identity();  // plate z = 0 -> undistorted px, h33 = 1
+  Eigen::Matrix3d camera_from_plate_rotation = Eigen::Matrix3d::Identity();         // camera_from_plate
+  Vec3 camera_from_plate_translation = Vec3::Zero();                                // camera_from_plate, mm
+  Eigen::Matrix3d image_from_plate = Eigen::Matrix3d::Identity();  // plate z = 0 -> undistorted px, h33 = 1
   double rms_px = 0;                                              // reprojection RMS over used corners
   int corners_used = 0;
   std::vector<int> used_ids, rejected_ids;                        // rejected: RANSAC outliers

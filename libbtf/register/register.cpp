@@ -53,7 +53,7 @@ std::pair<double, double> HomographyError(const Eigen::Matrix3d& a, const Eigen:
 // marker's height: such texels show the marker, not the cloth, in this photo.
 double OccludedFraction(const Board& board, const PhotoGeometry& g) {
   if (!g.has_pose) return 0;
-  const Vec3 cam = -g.rotation.transpose() * g.translation;
+  const Vec3 cam = -g.camera_from_plate_rotation.transpose() * g.camera_from_plate_translation;
   const double S = board.sample_size_mm;
   int hidden = 0;
   for (int j = 0; j < 64; ++j)
@@ -145,8 +145,8 @@ json PhotoReport::ToJson() const {
     j["model"] = has_pose ? "pose" : "homography";
     j["homography"] = btf::ToJson(homography);
     if (has_pose) {
-      j["rotation"] = btf::ToJson(rotation);
-      j["translation_mm"] = btf::ToJson(translation);
+      j["rotation"] = btf::ToJson(camera_from_plate_rotation);
+      j["translation_mm"] = btf::ToJson(camera_from_plate_translation);
     }
   }
   if (ok) {
@@ -335,9 +335,9 @@ class Registration {
     r.rejected_ids = g.rejected_ids;
     r.rms_px = g.rms_px;
     r.has_pose = g.has_pose;
-    r.homography = g.surface_homography;
-    r.rotation = g.rotation;
-    r.translation = g.translation;
+    r.homography = g.image_from_plate;
+    r.camera_from_plate_rotation = g.camera_from_plate_rotation;
+    r.camera_from_plate_translation = g.camera_from_plate_translation;
     if (auto t = truth_.find(e.file); t != truth_.end()) CompareWithTruth(t->second, g, r);
     // The whole sample must be in view: its border projects inside the photo (the map is a
     // homography plus radial distortion, so the border bounds the region).
@@ -367,7 +367,7 @@ class Registration {
         for (int k = 0; k < 4; ++k) ss += (d.corners[k] - c->second[k]).squaredNorm(), ++n;
     if (n) r.truth_corner_rms_px = std::sqrt(ss / n);
     std::tie(r.truth_homography_rms_px, r.truth_homography_max_px) =
-        HomographyError(g.surface_homography, truth.plate_to_image, S_);
+        HomographyError(g.image_from_plate, truth.image_from_plate, S_);
   }
 
   // Rectifies and normalizes every registered photo of view v (in parallel); returns the images

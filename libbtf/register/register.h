@@ -55,8 +55,8 @@ struct PhotoReport {
   double rms_px = 0;                      // reprojection RMS over used corners
   bool has_pose = false;
   Eigen::Matrix3d homography = Eigen::Matrix3d::Identity();  // plate mm (surface z = 0) -> undistorted px
-  Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();    // camera_from_plate (with pose)
-  Vec3 translation = Vec3::Zero();
+  Eigen::Matrix3d camera_from_plate_rotation = Eigen::Matrix3d::Identity();    // camera_from_plate (with pose)
+  Vec3 camera_from_plate_translation = Vec3::Zero();
   double invalid_fraction = 0, max_footprint_px = 0;
   std::vector<std::string> warnings;
   // With RegisterOptions::truth: RMS against the true marker corners and the true surface

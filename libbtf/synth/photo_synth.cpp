@@ -123,10 +123,10 @@ Board MakeBoard(const PhotoOptions& o, double tile_mm) {
 }
 
 bool CameraPose::Project(const Vec3& X, Vec2* pixel) const {
-  return ProjectToPixel(camera, rotation, translation, X, pixel);
+  return ProjectToPixel(camera, camera_from_plate_rotation, camera_from_plate_translation, X, pixel);
 }
 
-Eigen::Matrix3d CameraPose::PlateHomography() const { return PlaneHomography(camera, rotation, translation); }
+Eigen::Matrix3d CameraPose::PlateHomography() const { return PlaneHomography(camera, camera_from_plate_rotation, camera_from_plate_translation); }
 
 CameraPose MakeCamera(const PhotoOptions& o, const Board& board, const Vec3& view_dir) {
   const Vec3 v = view_dir.normalized();
@@ -149,10 +149,10 @@ CameraPose MakeCamera(const PhotoOptions& o, const Board& board, const Vec3& vie
   const Vec3 up = Vec3::UnitY() - Vec3::UnitY().dot(zc) * zc;
   const Vec3 yc = -up.normalized();
   const Vec3 xc = yc.cross(zc);
-  c.rotation.row(0) = xc.transpose();
-  c.rotation.row(1) = yc.transpose();
-  c.rotation.row(2) = zc.transpose();
-  c.translation = -c.rotation * c.center;
+  c.camera_from_plate_rotation.row(0) = xc.transpose();
+  c.camera_from_plate_rotation.row(1) = yc.transpose();
+  c.camera_from_plate_rotation.row(2) = zc.transpose();
+  c.camera_from_plate_translation = -c.camera_from_plate_rotation * c.center;
   return c;
 }
 
@@ -179,7 +179,7 @@ Image RenderPhoto(const SvbrdfModel& model, const Board& board, const PhotoOptio
   };
   const int W = o.width, H = o.height, n = o.pixel_samples;
   const auto& K = cam.camera;
-  const Eigen::Matrix3d Rt = cam.rotation.transpose();
+  const Eigen::Matrix3d Rt = cam.camera_from_plate_rotation.transpose();
   Image img(W, H, 3);
 #pragma omp parallel
   {
@@ -348,9 +348,9 @@ PhotoSummary SynthesizePhotos(const PhotoOptions& o, const SvbrdfModel& model, c
     manifest.photos.push_back(e);
     PhotoTruth tr;
     tr.file = file;
-    tr.plate_to_image = cam.PlateHomography();
-    tr.rotation = cam.rotation;
-    tr.translation = cam.translation;
+    tr.image_from_plate = cam.PlateHomography();
+    tr.camera_from_plate_rotation = cam.camera_from_plate_rotation;
+    tr.camera_from_plate_translation = cam.camera_from_plate_translation;
     for (const Marker& m : board.markers) {
       std::array<Vec2, 4> px;
       bool visible = true;

@@ -64,8 +64,8 @@ Board MakeBoard(const PhotoOptions& options, double tile_mm);
 // A camera at `view_dir` x distance looking at the plate center (image up ~ plate +y).
 struct CameraPose {
   CameraModel camera;
-  Eigen::Matrix3d rotation;  // camera_from_plate
-  Vec3 translation;          // camera_from_plate, mm
+  Eigen::Matrix3d camera_from_plate_rotation;  // camera_from_plate
+  Vec3 camera_from_plate_translation;          // camera_from_plate, mm
   Vec3 center;               // camera center in plate mm
   // Plate point (mm) -> pixel (OpenCV convention), distortion applied. False if behind the camera.
   bool Project(const Vec3& plate_point, Vec2* pixel) const;

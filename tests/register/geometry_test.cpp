@@ -70,7 +70,7 @@ TEST(Geometry, MarkerHeightShiftsTheSurfaceAwayFromTheCameraByHTanTheta) {
   // Where does the wrong map put the image of the surface point at the origin? Solve wrong(x) = right(0).
   Vec2 target;
   ASSERT_TRUE(right.Project(Vec3::Zero(), &target));
-  const Eigen::Matrix3d Hw = wrong.surface_homography;
+  const Eigen::Matrix3d Hw = wrong.image_from_plate;
   const Vec3 back = Hw.inverse() * Vec3(target.x(), target.y(), 1);
   const Vec2 apparent = back.head<2>() / back.z();
   const double expect = h * std::tan(DegToRad(theta));  // 2.75 mm, exact for the ray through the origin

@@ -44,9 +44,9 @@ struct TestCamera {
     PhotoGeometry g;
     g.has_pose = true;
     g.camera = model;
-    g.rotation = R;
-    g.translation = t;
-    g.surface_homography = PlaneHomography(model, R, t, 0);
+    g.camera_from_plate_rotation = R;
+    g.camera_from_plate_translation = t;
+    g.image_from_plate = PlaneHomography(model, R, t, 0);
     return g;
   }
 };

@@ -224,7 +224,7 @@ TEST(PhotoSynth, RectifiedPhotosReproduceGroundTruthNormtextures) {
     const Image img = ReadImage(dir / e.file);
     // 18 px per texel at 0 deg; 40 x 40 points per texel (0.45 px apart): dense enough that the
     // average of bilinear lookups equals the box average over the footprint (no aliasing).
-    auto rect = Rectify(img, truth[k].plate_to_image, board.sample_size_mm, N, 40);
+    auto rect = Rectify(img, truth[k].image_from_plate, board.sample_size_mm, N, 40);
     const double E = e.light_intensity * e.light_dir.z();  // directional light
     const int v = static_cast<int>(std::find(o.view_indices.begin(), o.view_indices.end(), e.view_index) -
                                    o.view_indices.begin());
@@ -282,7 +282,7 @@ TEST(PhotoSynth, ExrPhotosHoldRadianceAndPointLightFalloff) {
   // Detection squares end at 40 mm, cards (quiet zone) at 42 mm, the paper at 46 mm.
   ASSERT_NEAR(board.markers[0].corners_mm[0].x(), -40, 1e-9);
   const Vec3 P(-44, 0, 0);
-  const Eigen::Vector3d p = truth[0].plate_to_image * Eigen::Vector3d(P.x(), P.y(), 1);
+  const Eigen::Vector3d p = truth[0].image_from_plate * Eigen::Vector3d(P.x(), P.y(), 1);
   const int px = static_cast<int>(std::lround(p.x() / p.z())), py = static_cast<int>(std::lround(p.y() / p.z()));
   const Vec3 L = Vec3(0, 0, 400) - P;
   const double expect = 0.8 / kPi * 160000 * (L.z() / L.norm()) / L.squaredNorm();

@@ -96,16 +96,16 @@ TEST(RigIo, ManifestAndTruthRoundTrip) {
 
   PhotoTruth t;
   t.file = e.file;
-  t.plate_to_image << 10, 0.5, 320, -0.25, -9, 240, 1e-4, 2e-4, 1;
-  t.rotation = Eigen::AngleAxisd(0.3, Vec3(0, 1, 0)).toRotationMatrix();
-  t.translation = Vec3(1, 2, 400);
+  t.image_from_plate << 10, 0.5, 320, -0.25, -9, 240, 1e-4, 2e-4, 1;
+  t.camera_from_plate_rotation = Eigen::AngleAxisd(0.3, Vec3(0, 1, 0)).toRotationMatrix();
+  t.camera_from_plate_translation = Vec3(1, 2, 400);
   t.marker_corners_px[3] = {Vec2(1, 2), Vec2(3, 4), Vec2(5, 6), Vec2(7, 8)};
   WriteTruth(dir / "truth.json", {t});
   const auto rt = ReadTruth(dir / "truth.json");
   ASSERT_EQ(rt.size(), 1u);
-  EXPECT_EQ(rt[0].plate_to_image, t.plate_to_image);
-  EXPECT_EQ(rt[0].rotation, t.rotation);
-  EXPECT_EQ(rt[0].translation, t.translation);
+  EXPECT_EQ(rt[0].image_from_plate, t.image_from_plate);
+  EXPECT_EQ(rt[0].camera_from_plate_rotation, t.camera_from_plate_rotation);
+  EXPECT_EQ(rt[0].camera_from_plate_translation, t.camera_from_plate_translation);
   ASSERT_EQ(rt[0].marker_corners_px.count(3), 1u);
   EXPECT_EQ(rt[0].marker_corners_px.at(3)[2], Vec2(5, 6));
 }
