@@ -10,6 +10,7 @@
 #include <map>
 
 #include "libbtf/core/error.h"
+#include "libbtf/core/hash.h"
 
 namespace btf {
 namespace irawan2012 {
@@ -68,12 +69,7 @@ double SmoothStep01(double x) {
 }
 
 // Our own hashing (splitmix64 finalizer); used only when noise is on.
-std::uint64_t Mix(std::uint64_t z) {
-  z += 0x9e3779b97f4a7c15ULL;
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
-  return z ^ (z >> 31);
-}
+std::uint64_t Mix(std::uint64_t z) { return MixBits(z + 0x9e3779b97f4a7c15ULL); }
 // Integer keys are hashed as unsigned (wrapping) so no key arithmetic can overflow.
 std::uint64_t Hash(std::uint64_t a, std::uint64_t b, std::uint64_t stream) { return Mix(Mix(Mix(stream) ^ a) ^ b); }
 // Uniform in (0, 1] (never 0, so -log stays finite).
