@@ -9,7 +9,6 @@
 //   Codec::StoredBytes, RawBytes sizes; Codec::views()/lights() the samplings
 #include <cstdint>
 #include <filesystem>
-#include <functional>
 #include <optional>
 #include <string>
 #include <vector>

@@ -2,7 +2,6 @@
 // reassignment in texel blocks).
 #include <algorithm>
 #include <cmath>
-#include <functional>
 #include <future>
 #include <limits>
 #include <numeric>
