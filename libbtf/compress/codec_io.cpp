@@ -102,7 +102,7 @@ void WriteCodec(AtomicOutput& out, const Codec& c, const std::string& creator) {
         f.WriteFloats("/codec/lpca/weights", {H, W, k}, m.weights.data());
       }
     }
-    f.Flush();
+    f.Close();  // throws if the data did not all reach the file: nothing is committed
   }
   out.Commit();
 }

@@ -1,6 +1,9 @@
 #include "libbtf/core/atomic_file.h"
 
+#include <fcntl.h>
 #include <unistd.h>
+
+#include <cerrno>
 
 #include <array>
 #include <atomic>
@@ -70,11 +73,32 @@ void AtomicOutput::Reserve() {
   if (!f) ThrowIo("cannot create '{}' in the output folder: no permission or disk full?", temp_.string());
 }
 
+namespace {
+
+// fsync of a file or folder by path; false (errno set) on failure.
+bool SyncPath(const std::filesystem::path& path, int flags) {
+  const int fd = ::open(path.c_str(), flags | O_CLOEXEC);
+  if (fd < 0) return false;
+  const bool ok = ::fsync(fd) == 0;
+  const int err = errno;
+  ::close(fd);
+  errno = err;
+  return ok;
+}
+
+}  // namespace
+
 void AtomicOutput::Commit() {
+  // The data reaches the disk before the name does, so a power cut leaves the old file or the
+  // complete new one under the final name (docs/errors.md, "Faults").
+  if (!SyncPath(temp_, O_RDONLY))
+    ThrowIo("cannot write '{}' ({}): disk full or I/O error?", temp_.string(), std::strerror(errno));
   std::error_code ec;
   std::filesystem::rename(temp_, final_, ec);
   if (ec) ThrowIo("cannot move '{}' onto '{}': {}", temp_.string(), final_.string(), ec.message());
   committed_ = true;
+  const auto dir = final_.has_parent_path() ? final_.parent_path() : std::filesystem::path(".");
+  SyncPath(dir, O_RDONLY | O_DIRECTORY);  // best effort: some file systems refuse a folder fsync
 }
 
 void WriteTextFileAtomic(const std::filesystem::path& path, const std::string& text) {
@@ -82,7 +106,7 @@ void WriteTextFileAtomic(const std::filesystem::path& path, const std::string& t
   {
     std::ofstream f(out.temp_path(), std::ios::binary);
     f << text;
-    f.flush();
+    f.close();
     if (!f) ThrowIo("cannot write '{}': disk full or no permission?", path.string());
   }
   out.Commit();

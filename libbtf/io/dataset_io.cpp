@@ -166,8 +166,7 @@ void DatasetWriter::WriteViewSlot(int view, const float* data) {
 }
 
 void DatasetWriter::Commit() {
-  impl_->file.Flush();
-  impl_->file = h5::File();  // close before the rename
+  impl_->file.Close();  // throws if the data did not all reach the file: nothing is committed
   impl_->out.Commit();
 }
 

@@ -7,6 +7,8 @@
 #include <ctime>
 #include <mutex>
 
+#include <unistd.h>
+
 #include "libbtf/core/dataset.h"
 #include "libbtf/core/error.h"
 
@@ -90,6 +92,7 @@ File File::Create(const std::filesystem::path& path) {
   // parser is not memory-safe on damaged metadata; see docs/format.md). Readable by HDF5 >= 1.10.
   H5Pset_libver_bounds(fapl.id(), H5F_LIBVER_V110, H5F_LIBVER_V110);
   f.file_ = Handle(H5Fcreate(f.path_.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, fapl.id()));
+  f.created_ = true;
   if (!f.file_.valid()) ThrowIo("cannot create HDF5 file '{}': check the folder exists and is writable", f.path_);
   return f;
 }
@@ -411,6 +414,44 @@ std::string File::CheckFormatHeader(const std::string& format, int supported_maj
   return version;
 }
 
-void File::Flush() const { H5Fflush(id(), H5F_SCOPE_GLOBAL); }
+void File::Flush() const {
+  if (H5Fflush(id(), H5F_SCOPE_GLOBAL) < 0)
+    ThrowIo("cannot write HDF5 file '{}' ({}): disk full or I/O error?", path_, std::strerror(errno));
+}
+
+void File::Close() {
+  if (!file_.valid()) return;
+  const bool flushed = H5Fflush(file_.id(), H5F_SCOPE_GLOBAL) >= 0;
+  const int err = errno;
+  if (!flushed) DiscardUnwritten();
+  const bool closed = H5Fclose(file_.release()) >= 0;
+  if (!flushed || !closed)
+    ThrowIo("cannot write HDF5 file '{}' ({}): disk full or I/O error?", path_, std::strerror(flushed ? errno : err));
+}
+
+void File::DiscardUnwritten() const {
+  // HDF5 1.10 cannot close a file whose cached data it cannot write, and a second H5Fclose of
+  // it crashes: free the file's space (its content is being discarded: only files this object
+  // created, whose owner removes them) and flush again, so the close that follows succeeds.
+  if (created_ && truncate(path_.c_str(), 0) == 0) H5Fflush(file_.id(), H5F_SCOPE_GLOBAL);
+}
+
+void File::CloseQuietly() {
+  if (!file_.valid()) return;
+  if (created_ && H5Fflush(file_.id(), H5F_SCOPE_GLOBAL) < 0) DiscardUnwritten();
+  H5Fclose(file_.release());
+}
+
+File& File::operator=(File&& other) noexcept {
+  if (this != &other) {
+    CloseQuietly();
+    file_ = std::move(other.file_);
+    path_ = std::move(other.path_);
+    created_ = other.created_;
+  }
+  return *this;
+}
+
+File::~File() { CloseQuietly(); }
 
 }  // namespace btf::h5

@@ -30,6 +30,12 @@ class Handle {
   hid_t id() const { return id_; }
   bool valid() const { return id_ >= 0; }
   void reset();
+  // Gives up ownership without closing.
+  hid_t release() {
+    const hid_t id = id_;
+    id_ = H5I_INVALID_HID;
+    return id;
+  }
 
  private:
   hid_t id_ = H5I_INVALID_HID;
@@ -40,6 +46,14 @@ enum class Storage { kFloat32, kFloat16 };
 // An open file with its path kept for messages.
 class File {
  public:
+  File() = default;
+  File(File&&) noexcept = default;
+  File& operator=(File&& other) noexcept;
+  // Closes the file if Close() was not called (error paths): a created file whose cached data
+  // cannot be written (disk full) has its space freed first so that the close succeeds and no
+  // HDF5 object outlives the caller; its content is lost, which an error path wants (its owner
+  // removes it).
+  ~File();
   // Creates (truncating) a file for writing.
   static File Create(const std::filesystem::path& path);
   // Opens read-only; a missing, truncated or non-HDF5 file gives a bad-input/I/O error.
@@ -93,12 +107,20 @@ class File {
   std::string CheckFormatHeader(const std::string& format, int supported_major) const;
 
   void Flush() const;
+  // Flushes and closes a file written through this object. Throws btf::Error (I/O) naming the
+  // file when the data did not all reach it (disk full, I/O error): never commit it then.
+  void Close();
 
  private:
   static File OpenExisting(const std::filesystem::path& path, unsigned flags);
   Handle OpenDataset(const std::string& name) const;
+  // After a failed flush of a file this object created: frees its space and flushes again.
+  void DiscardUnwritten() const;
+  // Closes without reporting (destructor, move assignment).
+  void CloseQuietly();
   Handle file_;
   std::string path_;
+  bool created_ = false;  // made by Create(): its content may be discarded on a failed close
 };
 
 // Semantic version "MAJOR.MINOR.PATCH" -> MAJOR; -1 if malformed.

@@ -66,7 +66,9 @@ TEST(EvalRender, WhiteFurnace) {
     const Image img = Render(*btf, o);
     for (int y = 0; y < o.height; ++y)
       for (int x = 0; x < o.width; ++x)
-        if (TracePixel(o, x, y).hit) ASSERT_NEAR(img.at(x, y, 0), 0.8, 0.01 * 0.8) << scene << " " << x << "," << y;
+        if (TracePixel(o, x, y).hit) {
+          ASSERT_NEAR(img.at(x, y, 0), 0.8, 0.01 * 0.8) << scene << " " << x << "," << y;
+        }
   }
 }
 
