@@ -81,16 +81,7 @@ void WritePng(const std::filesystem::path& path, const Image& image) {
   WriteImage(path, image, wo);
 }
 
-// ---- Phase 1: read and check the dataset, describe it. ----
-
-// The dataset in memory; NaN/Inf refused up front with the item named (Compress would too, but
-// only for the first method).
-Dataset ReadChecked(const std::filesystem::path& path) {
-  Dataset data = ReadDataset(path);
-  const auto source = MemorySource(data, path.string());
-  for (int v = 0; v < data.num_views(); ++v) CheckFiniteSlot(*source, v, data.view_slot(v).data());
-  return data;
-}
+// ---- Phase 1: describe the dataset. ----
 
 SweepSummary Describe(const std::filesystem::path& dataset, const std::filesystem::path& dir, const Dataset& data,
                       const SweepOptions& o) {
@@ -123,7 +114,7 @@ std::vector<SweepPoint> Settings(const SweepOptions& o) {
 
 // Compresses `runs` times and decodes `runs` times, filling the point's times, sizes, stored
 // parameters and warnings; returns the codec and sets `decoded` to its decoded BTF.
-Codec CompressAndTime(const Dataset& data, const SweepOptions& o, SweepPoint& p, Dataset& decoded) {
+Codec CompressAndTime(const SlotSource& truth, const SweepOptions& o, SweepPoint& p, Dataset& decoded) {
   CompressOptions opt;
   opt.method = ParseMethod(p.method);
   opt.components = p.components;
@@ -134,7 +125,7 @@ Codec CompressAndTime(const Dataset& data, const SweepOptions& o, SweepPoint& p,
   CompressSummary cs;
   for (int r = 0; r < o.runs; ++r) {
     Timer t;
-    cs = Compress(opt, *MemorySource(data), &codec);
+    cs = Compress(opt, truth, &codec);
     p.compress_runs.push_back(t.Seconds());
   }
   p.warnings = cs.warnings;
@@ -209,7 +200,7 @@ class RenderChoice {
 };
 
 // Phases 2 and 3 for every setting, in order; codecs kept (files) and offered for rendering.
-std::vector<SweepPoint> MeasureSettings(const Dataset& data, const SlotSource& truth, const SweepOptions& o,
+std::vector<SweepPoint> MeasureSettings(const SlotSource& truth, const SweepOptions& o,
                                         const std::filesystem::path& dir, const Reporter& reporter,
                                         RenderChoice& choice, double* psnr_peak) {
   const std::vector<SweepPoint> todo = Settings(o);
@@ -218,7 +209,7 @@ std::vector<SweepPoint> MeasureSettings(const Dataset& data, const SlotSource& t
     reporter.Progress(i, todo.size(), "sweep");
     SweepPoint p = todo[i];
     Dataset decoded;
-    Codec codec = CompressAndTime(data, o, p, decoded);
+    Codec codec = CompressAndTime(truth, o, p, decoded);
     for (const auto& w : p.warnings) reporter.Warn("{}: {}", PointName(p), w);
     *psnr_peak = Evaluate(truth, decoded, o, p);
     if (o.keep_codecs) KeepCodec(dir, codec, p);
@@ -526,8 +517,10 @@ SweepSummary RunSweep(const SweepOptions& o, const std::filesystem::path& datase
                       const Reporter& reporter) {
   o.Check();
   Timer timer;
-  const Dataset data = ReadChecked(dataset_path);
+  const Dataset data = ReadDataset(dataset_path);
   const auto truth = MemorySource(data, dataset_path.string());
+  // NaN/Inf refused up front with the item named (Compress would too, but only for the first method).
+  for (int v = 0; v < data.num_views(); ++v) CheckFiniteSlot(*truth, v, data.view_slot(v).data());
   std::filesystem::create_directories(dir);
   if (o.keep_codecs) std::filesystem::create_directories(dir / "codecs");
   SweepSummary s = Describe(dataset_path, dir, data, o);
@@ -535,7 +528,7 @@ SweepSummary RunSweep(const SweepOptions& o, const std::filesystem::path& datase
 
   timer.Restart();
   RenderChoice choice(o.render_max_rel_error);
-  s.points = MeasureSettings(data, *truth, o, dir, reporter, choice, &s.psnr_peak);
+  s.points = MeasureSettings(*truth, o, dir, reporter, choice, &s.psnr_peak);
   s.times.Add("sweep", timer.Seconds());
 
   timer.Restart();

@@ -414,11 +414,6 @@ std::string File::CheckFormatHeader(const std::string& format, int supported_maj
   return version;
 }
 
-void File::Flush() const {
-  if (H5Fflush(id(), H5F_SCOPE_GLOBAL) < 0)
-    ThrowIo("cannot write HDF5 file '{}' ({}): disk full or I/O error?", path_, std::strerror(errno));
-}
-
 void File::Close() {
   if (!file_.valid()) return;
   const bool flushed = H5Fflush(file_.id(), H5F_SCOPE_GLOBAL) >= 0;

@@ -106,7 +106,6 @@ class File {
   // Returns the version string.
   std::string CheckFormatHeader(const std::string& format, int supported_major) const;
 
-  void Flush() const;
   // Flushes and closes a file written through this object. Throws btf::Error (I/O) naming the
   // file when the data did not all reach it (disk full, I/O error): never commit it then.
   void Close();
