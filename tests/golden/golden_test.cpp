@@ -13,6 +13,11 @@
 // "times", "seconds"), "creation_time", and the tool metadata "tool", "version", "schema_version",
 // "options" at the top level of a JSON file. Every other file (PNG, raw textures) is compared byte
 // for byte.
+//
+// The digests hold for the compiler flags that ./run test builds with. Sanitizer instrumentation
+// changes inlining and vectorization, and with them the last bits of floating-point results, so
+// the sanitizer build (./run test --sanitize) runs the same pipeline, under ASan and UBSan, and
+// checks that it writes the same set of files, not their digests.
 #include <gtest/gtest.h>
 #include <hdf5.h>
 
@@ -255,7 +260,9 @@ TEST(Golden, FixedSeedOutputsAreUnchanged) {
   const nlohmann::json want = nlohmann::json::parse(FileBytes(golden));
   for (const auto& [name, digest] : want.items()) {
     ASSERT_TRUE(got.contains(name)) << name << " is no longer written";
+#ifndef BTF_SANITIZER_BUILD
     EXPECT_EQ(got[name], digest) << name << " differs from the recorded run";
+#endif
   }
   for (const auto& [name, digest] : got.items()) EXPECT_TRUE(want.contains(name)) << name << " is new";
 }
