@@ -7,6 +7,7 @@
 
 #include <Eigen/Geometry>
 
+#include "libbtf/core/atomic_file.h"
 #include "libbtf/core/error.h"
 
 namespace btf {
@@ -86,9 +87,7 @@ SceneSpec SceneSpec::FromJson(const nlohmann::json& j, const std::string& source
 }
 
 SceneSpec SceneSpec::Load(const std::filesystem::path& path) {
-  std::ifstream in(path);
-  if (!in) ThrowIo("cannot open scene file '{}'", path.string());
-  const nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
+  const nlohmann::json j = nlohmann::json::parse(ReadFileBytes(path, "scene file"), nullptr, false);
   if (j.is_discarded()) ThrowBadInput("scene '{}' is not valid JSON", path.string());
   return FromJson(j, path.string());
 }

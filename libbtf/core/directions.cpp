@@ -7,6 +7,7 @@
 
 #include <Eigen/Dense>
 
+#include "libbtf/core/atomic_file.h"
 #include "libbtf/core/error.h"
 
 namespace btf {
@@ -128,8 +129,7 @@ Sampling Sampling::Ubo151() {
 Sampling Sampling::Single(const Vec3& direction) { return Sampling("single", {direction}); }
 
 Sampling Sampling::FromFile(const std::filesystem::path& path) {
-  std::ifstream in(path);
-  if (!in) ThrowIo("cannot open direction list '{}': check the path", path.string());
+  std::istringstream in(ReadFileBytes(path, "direction list"));
   std::vector<Vec3> dirs;
   std::string line;
   int line_no = 0;

@@ -58,15 +58,15 @@ std::string Base64(const std::string& bytes) {
 
 namespace {
 
-nlohmann::json Opt(const std::optional<double>& v) { return v ? nlohmann::json(*v) : nlohmann::json(nullptr); }
+// The sweep's folder: files are written under the temporary folder (AtomicDirectory) and
+// recorded by their final names.
+struct OutputFolder {
+  std::filesystem::path work, final;
+  std::filesystem::path Work(const std::string& name) const { return work / name; }
+  std::string Final(const std::string& name) const { return (final / name).string(); }
+};
 
-std::string ReadBytes(const std::filesystem::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  if (!in) ThrowIo("cannot read '{}'", p.string());
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+nlohmann::json Opt(const std::optional<double>& v) { return v ? nlohmann::json(*v) : nlohmann::json(nullptr); }
 
 std::string PointName(const SweepPoint& p) {
   return p.method == "lpca" ? fmt::format("lpca_k{}_c{}", p.clusters, p.components)
@@ -161,11 +161,11 @@ double Evaluate(const SlotSource& truth, const Dataset& decoded, const SweepOpti
   return e.peak;
 }
 
-void KeepCodec(const std::filesystem::path& dir, const Codec& codec, SweepPoint& p) {
-  const auto file = dir / "codecs" / (PointName(p) + ".h5");
-  WriteCodec(file, codec, "btf-eval sweep");
-  p.codec_file = file.string();
-  p.file_bytes = std::filesystem::file_size(file);
+void KeepCodec(const OutputFolder& out, const Codec& codec, SweepPoint& p) {
+  const std::string name = "codecs/" + PointName(p) + ".h5";
+  WriteCodec(out.Work(name), codec, "btf-eval sweep");
+  p.codec_file = out.Final(name);
+  p.file_bytes = std::filesystem::file_size(out.Work(name));
 }
 
 // The codec each method renders (see SweepOptions::render_max_rel_error), with its point index.
@@ -201,7 +201,7 @@ class RenderChoice {
 
 // Phases 2 and 3 for every setting, in order; codecs kept (files) and offered for rendering.
 std::vector<SweepPoint> MeasureSettings(const SlotSource& truth, const SweepOptions& o,
-                                        const std::filesystem::path& dir, const Reporter& reporter,
+                                        const OutputFolder& out, const Reporter& reporter,
                                         RenderChoice& choice, double* psnr_peak) {
   const std::vector<SweepPoint> todo = Settings(o);
   std::vector<SweepPoint> points;
@@ -212,7 +212,7 @@ std::vector<SweepPoint> MeasureSettings(const SlotSource& truth, const SweepOpti
     Codec codec = CompressAndTime(truth, o, p, decoded);
     for (const auto& w : p.warnings) reporter.Warn("{}: {}", PointName(p), w);
     *psnr_peak = Evaluate(truth, decoded, o, p);
-    if (o.keep_codecs) KeepCodec(dir, codec, p);
+    if (o.keep_codecs) KeepCodec(out, codec, p);
     reporter.Info("{}: {} bytes (ratio {:.1f}), compress {:.4g} s, decode {:.4g} s, {} {:.5g}", PointName(p), p.bytes,
                   p.ratio_float32, p.compress_s, p.decode_s, o.error_metric, p.error);
     points.push_back(std::move(p));
@@ -283,11 +283,11 @@ std::vector<std::pair<std::string, Plot>> MakePlots(std::vector<SweepPoint>& poi
                                             &SweepPoint::decode_s, nullptr, fd, false)}};
 }
 
-void WritePlots(const std::filesystem::path& dir, const std::vector<std::pair<std::string, Plot>>& plots,
+void WritePlots(const OutputFolder& out, const std::vector<std::pair<std::string, Plot>>& plots,
                 std::vector<std::string>& files) {
   for (const auto& [name, plot] : plots) {
-    WriteTextFileAtomic(dir / (name + ".svg"), PlotSvg(plot));
-    files.push_back((dir / (name + ".svg")).string());
+    WriteTextFileAtomic(out.Work(name + ".svg"), PlotSvg(plot));
+    files.push_back(out.Final(name + ".svg"));
   }
 }
 
@@ -295,7 +295,7 @@ void WritePlots(const std::filesystem::path& dir, const std::vector<std::pair<st
 
 std::vector<SweepRender> RenderComparisons(const Dataset& data, const std::vector<SweepPoint>& points,
                                            const RenderChoice& choice, const SweepOptions& o,
-                                           const std::filesystem::path& dir, const Reporter& reporter,
+                                           const OutputFolder& out, const Reporter& reporter,
                                            std::vector<std::string>& files) {
   std::vector<SweepRender> renders;
   const auto gt = DatasetEvaluator(data);
@@ -322,8 +322,9 @@ std::vector<SweepRender> RenderComparisons(const Dataset& data, const std::vecto
       }
       r.max_rel_diff = ps.max_rel_diff;
       r.mean_rel_diff = ps.mean_rel_diff;
-      r.file = (dir / fmt::format("render_{}_{}_{}.png", m, scene, lighting)).string();
-      WritePng(r.file, panel);
+      const std::string name = fmt::format("render_{}_{}_{}.png", m, scene, lighting);
+      r.file = out.Final(name);
+      WritePng(out.Work(name), panel);
       files.push_back(r.file);
       renders.push_back(r);
     }
@@ -404,7 +405,7 @@ std::string LightingText(const SweepRender& r, const RenderOptions& ro) {
                      l.x(), l.y(), l.z(), elevation);
 }
 
-std::string ReportRenders(const SweepSummary& s, const SweepOptions& o) {
+std::string ReportRenders(const SweepSummary& s, const SweepOptions& o, const OutputFolder& out) {
   if (s.renders.empty()) return {};
   std::string h =
       "<h2>Rendered comparison</h2>\n<p>Each picture: ground truth | decoded | difference. Ground truth = the "
@@ -421,7 +422,7 @@ std::string ReportRenders(const SweepSummary& s, const SweepOptions& o) {
     h += fmt::format("<figure class=\"render\"><img alt=\"{0}: {1}, {2} light\" src=\"data:image/png;base64,{3}\">"
                      "<figcaption><b>{0}</b>: {1} under {4}. Largest difference {5:.3g} %, mean {6:.3g} %."
                      "</figcaption></figure>\n",
-                     EscapeXml(r.label), r.scene, r.lighting, Base64(ReadBytes(r.file)),
+                     EscapeXml(r.label), r.scene, r.lighting, Base64(ReadFileBytes(out.Work(std::filesystem::path(r.file).filename().string()), "render")),
                      LightingText(r, o.render_options), 100 * r.max_rel_diff, 100 * r.mean_rel_diff);
   return h + "</div>\n";
 }
@@ -440,19 +441,19 @@ std::string ReportMetrics() {
 }
 
 std::string ReportHtml(const SweepSummary& s, const SweepOptions& o,
-                       const std::vector<std::pair<std::string, Plot>>& plots) {
-  return ReportHead(s) + ReportIntro(s, o) + ReportPlots(plots) + ReportTable(s) + ReportRenders(s, o) +
+                       const std::vector<std::pair<std::string, Plot>>& plots, const OutputFolder& out) {
+  return ReportHead(s) + ReportIntro(s, o) + ReportPlots(plots) + ReportTable(s) + ReportRenders(s, o, out) +
          ReportMetrics();
 }
 
 // results.json and report.html (last), added to the summary's files.
-void WriteResultsAndReport(const std::filesystem::path& dir, const SweepOptions& o,
+void WriteResultsAndReport(const OutputFolder& out, const SweepOptions& o,
                            const std::vector<std::pair<std::string, Plot>>& plots, SweepSummary& s) {
-  s.report = (dir / "report.html").string();
-  s.files.push_back((dir / "results.json").string());
+  s.report = out.Final("report.html");
+  s.files.push_back(out.Final("results.json"));
   s.files.push_back(s.report);
-  WriteTextFileAtomic(dir / "results.json", s.ToJson().dump(2));
-  WriteTextFileAtomic(s.report, ReportHtml(s, o, plots));
+  WriteTextFileAtomic(out.Work("results.json"), s.ToJson().dump(2));
+  WriteTextFileAtomic(out.Work("report.html"), ReportHtml(s, o, plots, out));
 }
 
 }  // namespace
@@ -521,29 +522,31 @@ SweepSummary RunSweep(const SweepOptions& o, const std::filesystem::path& datase
   const auto truth = MemorySource(data, dataset_path.string());
   // NaN/Inf refused up front with the item named (Compress would too, but only for the first method).
   for (int v = 0; v < data.num_views(); ++v) CheckFiniteSlot(*truth, v, data.view_slot(v).data());
-  std::filesystem::create_directories(dir);
-  if (o.keep_codecs) std::filesystem::create_directories(dir / "codecs");
+  AtomicDirectory folder(dir, "results.json");
+  const OutputFolder out{folder.temp_path(), dir};
+  if (o.keep_codecs) std::filesystem::create_directories(out.Work("codecs"));
   SweepSummary s = Describe(dataset_path, dir, data, o);
   s.times.Add("read", timer.Seconds());
 
   timer.Restart();
   RenderChoice choice(o.render_max_rel_error);
-  s.points = MeasureSettings(*truth, o, dir, reporter, choice, &s.psnr_peak);
+  s.points = MeasureSettings(*truth, o, out, reporter, choice, &s.psnr_peak);
   s.times.Add("sweep", timer.Seconds());
 
   timer.Restart();
   const auto plots = MakePlots(s.points, o.error_metric);
-  WritePlots(dir, plots, s.files);
+  WritePlots(out, plots, s.files);
   s.times.Add("plots", timer.Seconds());
 
   if (o.render) {
     timer.Restart();
-    s.renders = RenderComparisons(data, s.points, choice, o, dir, reporter, s.files);
+    s.renders = RenderComparisons(data, s.points, choice, o, out, reporter, s.files);
     s.times.Add("render", timer.Seconds());
   }
 
   timer.Restart();
-  WriteResultsAndReport(dir, o, plots, s);
+  WriteResultsAndReport(out, o, plots, s);
+  folder.Commit();
   s.times.Add("report", timer.Seconds());
   return s;
 }

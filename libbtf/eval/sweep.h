@@ -88,7 +88,8 @@ struct SweepSummary {
   std::string Report() const;  // the settings table and where the report is
 };
 
-// Reads the dataset into memory, sweeps, writes into output_dir (created if missing).
+// Reads the dataset into memory, sweeps, writes the folder output_dir atomically as a whole
+// (AtomicDirectory: an earlier sweep there is replaced only once the new one is complete).
 SweepSummary RunSweep(const SweepOptions& options, const std::filesystem::path& dataset,
                       const std::filesystem::path& output_dir, const Reporter& reporter = {});
 

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <fstream>
 
 #include "libbtf/core/atomic_file.h"
 #include "libbtf/core/error.h"
@@ -13,14 +12,7 @@ namespace {
 
 template <typename T>
 std::uint64_t WriteBinary(const std::filesystem::path& path, const std::vector<T>& data) {
-  AtomicOutput out(path);
-  {
-    std::ofstream f(out.temp_path(), std::ios::binary);
-    f.write(reinterpret_cast<const char*>(data.data()), static_cast<std::streamsize>(data.size() * sizeof(T)));
-    f.close();
-    if (!f) ThrowIo("cannot write '{}'", path.string());
-  }
-  out.Commit();
+  WriteFileAtomic(path, data.data(), data.size() * sizeof(T));
   return data.size() * sizeof(T);
 }
 
@@ -53,7 +45,7 @@ std::string SchneiderExportSummary::Report() const {
 }
 
 SchneiderExportSummary ExportSchneider(const SchneiderExportOptions& o, const Codec& codec,
-                                       const std::filesystem::path& dir, const Reporter& rep) {
+                                       const std::filesystem::path& out_dir, const Reporter& rep) {
   o.Check();
   if (codec.method() != CodecMethod::kLpca)
     ThrowUsage("the schneider export needs an LPCA codec; this one is '{}' (compress with --method lpca)",
@@ -69,9 +61,8 @@ SchneiderExportSummary ExportSchneider(const SchneiderExportOptions& o, const Co
   const int F = 1 + c, nv = o.view_grid, nl = o.light_grid, C = codec.channels(), L = codec.num_lights();
   const std::size_t d = codec.abrdf_size(), T = std::size_t(codec.height()) * codec.width();
   const std::size_t grid = std::size_t(nv) * nv * nl * nl;  // per function, per channel
-  std::error_code ec;
-  std::filesystem::create_directories(dir, ec);
-  if (ec) ThrowIo("cannot create export folder '{}': {}", dir.string(), ec.message());
+  AtomicDirectory output(out_dir, "manifest.json");
+  const std::filesystem::path& dir = output.temp_path();
 
   // Interpolants of every grid direction over the codec's samplings.
   std::vector<Interpolant> view_ip(std::size_t(nv) * nv), light_ip(std::size_t(nl) * nl);
@@ -180,8 +171,9 @@ SchneiderExportSummary ExportSchneider(const SchneiderExportOptions& o, const Co
       "per value: sum_f |weights[f]| / 255 (half a step of 2/255 in each function's [-1, 1] range)";
   j["byte_order"] = "little-endian";
   WriteTextFileAtomic(dir / "manifest.json", j.dump(2) + "\n");
+  output.Commit();
   s.times.Add("write", timer.Seconds());
-  s.directory = dir.string();
+  s.directory = out_dir.string();
   s.clusters = K;
   s.functions = F;
   s.view_grid = nv;

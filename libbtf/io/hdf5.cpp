@@ -1,5 +1,6 @@
 #include "libbtf/io/hdf5.h"
 
+#include <atomic>
 #include <cerrno>
 #include <chrono>
 #include <cstdio>
@@ -7,6 +8,7 @@
 #include <ctime>
 #include <mutex>
 
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "libbtf/core/dataset.h"
@@ -14,23 +16,65 @@
 
 namespace btf::h5 {
 
+namespace {
+// HDF5 1.10 leaves a file whose H5Fclose failed (a write at close failing: disk full, I/O error)
+// half-destroyed, and the handler it registers with atexit then crashes closing it again. Every
+// file is closed explicitly (File::Close, File::CloseQuietly), so the handler is not needed;
+// H5dont_atexit must run before any other HDF5 call, hence a static initializer.
+[[maybe_unused]] const herr_t kNoAtexit = H5dont_atexit();
+
+// Closes that failed, process-wide. Closing a dataset writes its cached chunks, so a failed
+// close is lost data; File::Close() refuses a file when any close failed since it was created.
+std::atomic<std::uint64_t> g_failed_closes{0};
+
+// Set once any HDF5 call failed on a failed read or write system call (see IoErrorSeen()).
+std::atomic<bool> g_io_error_seen{false};
+
+herr_t FindIoError(unsigned, const H5E_error2_t* e, void* found) {
+  // The file driver's failed read or write system call; a failed checksum is H5E_STORAGE.
+  if (e->maj_num == H5E_IO && (e->min_num == H5E_READERROR || e->min_num == H5E_WRITEERROR))
+    *static_cast<bool*>(found) = true;
+  return 0;
+}
+}  // namespace
+
+bool LastErrorWasIo() {
+  bool found = false;
+  H5Ewalk2(H5E_DEFAULT, H5E_WALK_DOWNWARD, FindIoError, &found);
+  if (found) g_io_error_seen = true;
+  return found;
+}
+
+namespace {
+// HDF5 calls this when an API call fails: nothing is printed (we report errors ourselves), but
+// a failed system call underneath is remembered.
+herr_t NoteIoError(hid_t, void*) {
+  LastErrorWasIo();
+  return 0;
+}
+}  // namespace
+
 void SilenceErrors() {
   static std::once_flag once;
-  std::call_once(once, [] { H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr); });
+  std::call_once(once, [] { H5Eset_auto2(H5E_DEFAULT, NoteIoError, nullptr); });
 }
+
+bool IoErrorSeen() { return g_io_error_seen.load(); }
 
 void Handle::reset() {
   if (id_ < 0) return;
+  herr_t r = 0;
   switch (H5Iget_type(id_)) {
-    case H5I_FILE: H5Fclose(id_); break;
-    case H5I_GROUP: H5Gclose(id_); break;
-    case H5I_DATASET: H5Dclose(id_); break;
-    case H5I_DATASPACE: H5Sclose(id_); break;
-    case H5I_DATATYPE: H5Tclose(id_); break;
-    case H5I_ATTR: H5Aclose(id_); break;
-    case H5I_GENPROP_LST: H5Pclose(id_); break;
+    case H5I_FILE: r = H5Fclose(id_); break;
+    case H5I_GROUP: r = H5Gclose(id_); break;
+    case H5I_DATASET: r = H5Dclose(id_); break;
+    case H5I_DATASPACE: r = H5Sclose(id_); break;
+    case H5I_DATATYPE: r = H5Tclose(id_); break;
+    case H5I_ATTR: r = H5Aclose(id_); break;
+    case H5I_GENPROP_LST: r = H5Pclose(id_); break;
     default: break;
   }
+  if (r < 0) ++g_failed_closes;
   id_ = H5I_INVALID_HID;
 }
 
@@ -62,23 +106,31 @@ namespace {
 // Refuses files without checksummed metadata before HDF5 parses them: libbtf writes superblock
 // version >= 2 (metadata checksums); older layouts carry no checksums, and HDF5 1.10.8 can
 // crash on damaged unchecksummed metadata.
-void CheckSuperblock(const std::string& path) {
+// Returns the checked file's identity (device, inode), so the caller can tell whether HDF5 then
+// opened the same file.
+std::pair<dev_t, ino_t> CheckSuperblock(const std::string& path) {
   std::FILE* f = std::fopen(path.c_str(), "rb");
   if (!f) ThrowIo("cannot open '{}': {}", path, std::strerror(errno));
+  struct stat st{};
+  fstat(fileno(f), &st);
   static const unsigned char kSignature[8] = {0x89, 'H', 'D', 'F', '\r', '\n', 0x1a, '\n'};
   int version = -1;
   // The superblock sits at byte 0, 512, 1024, 2048, ... (user block).
   for (long offset = 0; offset <= (1L << 20) && version < 0; offset = offset ? offset * 2 : 512) {
     unsigned char buf[9];
-    if (std::fseek(f, offset, SEEK_SET) != 0 || std::fread(buf, 1, 9, f) != 9) break;
+      if (std::fseek(f, offset, SEEK_SET) != 0 || std::fread(buf, 1, 9, f) != 9) break;
     if (std::memcmp(buf, kSignature, 8) == 0) version = buf[8];
   }
+  const bool read_error = std::ferror(f) != 0;
+  const int err = errno;
   std::fclose(f);
+  if (read_error) ThrowIo("cannot read '{}': {}", path, std::strerror(err));
   if (version < 0) ThrowBadInput("'{}' is not an HDF5 file (wrong file, or its header is corrupt)", path);
   if (version < 2)
     ThrowBadInput("'{}' uses HDF5 superblock version {} without metadata checksums; libbtf writes and reads "
                   "version >= 2 files only (re-create it with libbtf, or convert it with h5repack)",
                   path, version);
+  return {st.st_dev, st.st_ino};
 }
 }  // namespace
 
@@ -93,6 +145,7 @@ File File::Create(const std::filesystem::path& path) {
   H5Pset_libver_bounds(fapl.id(), H5F_LIBVER_V110, H5F_LIBVER_V110);
   f.file_ = Handle(H5Fcreate(f.path_.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, fapl.id()));
   f.created_ = true;
+  f.failed_closes_at_create_ = g_failed_closes.load();
   if (!f.file_.valid()) ThrowIo("cannot create HDF5 file '{}': check the folder exists and is writable", f.path_);
   return f;
 }
@@ -101,13 +154,25 @@ File File::OpenExisting(const std::filesystem::path& path, unsigned flags) {
   SilenceErrors();
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) ThrowIo("cannot open '{}': no such file", path.string());
-  CheckSuperblock(path.string());
+  const auto checked = CheckSuperblock(path.string());
   const hid_t id = H5Fopen(path.c_str(), flags, H5P_DEFAULT);
-  if (id < 0)
+  const auto changed = [&] {
+    ThrowIo("'{}' was deleted or replaced by another program while it was being opened; run again", path.string());
+  };
+  if (id < 0) {
+    if (LastErrorWasIo()) ThrowIo("cannot read HDF5 file '{}': I/O error (failing disk or network file system?)", path.string());
+    if (!std::filesystem::exists(path, ec)) changed();
     ThrowBadInput("cannot open HDF5 file '{}': the file is truncated or corrupt; re-create or re-copy it", path.string());
+  }
   File f;
   f.file_ = Handle(id);
   f.path_ = path.string();
+  // From here on the open file is read whatever happens to its name; it must be the one checked.
+  int* fd = nullptr;
+  struct stat st{};
+  if (H5Fget_vfd_handle(id, H5P_DEFAULT, reinterpret_cast<void**>(&fd)) >= 0 && fd && fstat(*fd, &st) == 0 &&
+      (st.st_dev != checked.first || st.st_ino != checked.second))
+    changed();
   return f;
 }
 
@@ -165,7 +230,7 @@ T ReadNumericAttr(const File& f, const std::string& object, const std::string& n
     ThrowBadInput("'{}': attribute '{}' on '{}' must be a single number", f.path(), name, object);
   T v{};
   if (H5Aread(attr.id(), mem_type, &v) < 0)
-    ThrowBadInput("'{}': cannot read attribute '{}' on '{}'", f.path(), name, object);
+    ThrowUnreadable(f.path(), fmt::format("attribute '{}' on '{}'", name, object));
   return v;
 }
 
@@ -261,6 +326,7 @@ void WriteWhole(const File& f, const std::string& name, const std::vector<hsize_
     H5Pset_chunk(dcpl.id(), static_cast<int>(chunk.size()), chunk.data());
     H5Pset_shuffle(dcpl.id());
     H5Pset_deflate(dcpl.id(), 4);
+    H5Pset_fletcher32(dcpl.id());  // a damaged or truncated chunk is refused, never read as zeros
   }
   Handle ds(H5Dcreate2(f.id(), name.c_str(), file_type, space.id(), H5P_DEFAULT, dcpl.id(), H5P_DEFAULT));
   if (!ds.valid() || H5Dwrite(ds.id(), mem_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, data) < 0)
@@ -312,7 +378,7 @@ std::vector<T> ReadWhole(const File& f, const std::string& name, hid_t mem_type,
     ThrowBadInput("'{}': dataset '{}' has the wrong element type", f.path(), name);
   std::vector<T> out(n);
   if (n > 0 && H5Dread(ds.id(), mem_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, out.data()) < 0)
-    ThrowBadInput("'{}': cannot read dataset '{}': the file is truncated or corrupt", f.path(), name);
+    ThrowUnreadable(f.path(), fmt::format("dataset '{}'", name));
   return out;
 }
 }  // namespace
@@ -336,6 +402,7 @@ void File::CreateFloatArray(const std::string& name, const std::vector<hsize_t>&
     H5Pset_shuffle(dcpl.id());
     H5Pset_deflate(dcpl.id(), static_cast<unsigned>(deflate_level));
   }
+  H5Pset_fletcher32(dcpl.id());  // a damaged or truncated chunk is refused, never read as zeros
   const hid_t type = storage == Storage::kFloat16 ? HalfType() : H5T_IEEE_F32LE;
   Handle ds(H5Dcreate2(id(), name.c_str(), type, space.id(), H5P_DEFAULT, dcpl.id(), H5P_DEFAULT));
   if (!ds.valid()) ThrowIo("'{}': cannot create dataset '{}'", path_, name);
@@ -374,7 +441,7 @@ void File::ReadSlab(const std::string& name, const std::vector<hsize_t>& offset,
   Handle fspace = SelectSlab(*this, ds.id(), name, offset, count);
   Handle mspace(H5Screate_simple(static_cast<int>(count.size()), count.data(), nullptr));
   if (H5Dread(ds.id(), H5T_NATIVE_FLOAT, mspace.id(), fspace.id(), H5P_DEFAULT, data) < 0)
-    ThrowBadInput("'{}': cannot read from '{}': the file is truncated or corrupt", path_, name);
+    ThrowUnreadable(path_, fmt::format("dataset '{}'", name));
 }
 
 std::string File::StorageOf(const std::string& name) const {
@@ -414,9 +481,15 @@ std::string File::CheckFormatHeader(const std::string& format, int supported_maj
   return version;
 }
 
+void ThrowUnreadable(const std::string& path, const std::string& what) {
+  if (LastErrorWasIo()) ThrowIo("'{}': cannot read {}: I/O error (failing disk or network file system?)", path, what);
+  ThrowBadInput("'{}': cannot read {}: the file is truncated or corrupt", path, what);
+}
+
 void File::Close() {
   if (!file_.valid()) return;
-  const bool flushed = H5Fflush(file_.id(), H5F_SCOPE_GLOBAL) >= 0;
+  const bool flushed = H5Fflush(file_.id(), H5F_SCOPE_GLOBAL) >= 0 &&
+                       (!created_ || g_failed_closes.load() == failed_closes_at_create_);
   const int err = errno;
   if (!flushed) DiscardUnwritten();
   const bool closed = H5Fclose(file_.release()) >= 0;

@@ -1,5 +1,6 @@
 #include "libbtf/io/image_io.h"
 
+#include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
 
 #include <algorithm>
@@ -32,25 +33,23 @@ std::string Lower(std::string s) {
 // header can cost gigabytes and seconds (found by fuzz_image). Walk the attribute list first
 // (name\0 type\0 int32 size, value; one or more headers, each ending in an empty name) and refuse
 // any attribute larger than the bytes left in the file. Files that are not OpenEXR pass through.
-void CheckExrHeader(const std::string& name) {
-  std::FILE* f = std::fopen(name.c_str(), "rb");
-  if (!f) return;  // OIIO reports the open error
-  const std::unique_ptr<std::FILE, int (*)(std::FILE*)> closer(f, std::fclose);
-  unsigned char head[8];
-  if (std::fread(head, 1, 8, f) != 8 || head[0] != 0x76 || head[1] != 0x2f || head[2] != 0x31 || head[3] != 0x01)
-    return;
-  std::error_code ec;
-  const auto file_size = static_cast<long long>(std::filesystem::file_size(name, ec));
+void CheckExrHeader(const std::string& name, const std::string& bytes) {
+  const auto* head = reinterpret_cast<const unsigned char*>(bytes.data());
+  if (bytes.size() < 8 || head[0] != 0x76 || head[1] != 0x2f || head[2] != 0x31 || head[3] != 0x01) return;
+  const long long file_size = static_cast<long long>(bytes.size());
   const bool multipart = head[5] & 0x10;  // version flags: bit 12
   const auto fail = [&](const std::string& what) {
     ThrowBadInput("cannot read image '{}': corrupt OpenEXR header ({}); re-export or re-copy the file", name, what);
   };
+  std::size_t pos = 8;
   const auto read_string = [&](std::string& out) {
     out.clear();
-    for (int c; (c = std::fgetc(f)) != 0;) {
-      if (c == EOF) fail("truncated");
+    for (;;) {
+      if (pos >= bytes.size()) fail("truncated");
+      const char c = bytes[pos++];
+      if (c == 0) break;
       if (out.size() >= 255) fail("attribute name longer than 255 bytes");
-      out.push_back(static_cast<char>(c));
+      out.push_back(c);
     }
   };
   std::string attr, type;
@@ -64,14 +63,15 @@ void CheckExrHeader(const std::string& name) {
       if (attr.empty()) break;
       if (++attributes > 100000) fail("too many attributes");
       read_string(type);
-      unsigned char b[4];
-      if (std::fread(b, 1, 4, f) != 4) fail("truncated");
+      if (pos + 4 > bytes.size()) fail("truncated");
+      const auto* b = head + pos;
+      pos += 4;
       const std::int32_t size = std::int32_t(std::uint32_t(b[0]) | std::uint32_t(b[1]) << 8 | std::uint32_t(b[2]) << 16 |
                                              std::uint32_t(b[3]) << 24);
-      const long long left = file_size - std::ftell(f);
+      const long long left = file_size - static_cast<long long>(pos);
       if (size < 0 || size > left)
         fail(fmt::format("attribute '{}' of type '{}' claims {} bytes, {} left in the file", attr, type, size, left));
-      std::fseek(f, size, SEEK_CUR);
+      pos += static_cast<std::size_t>(size);
     }
     if (!multipart) break;
   }
@@ -82,12 +82,30 @@ Image ReadImage(const std::filesystem::path& path) {
   const std::string name = path.string();
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) ThrowIo("cannot read image '{}': no such file", name);
-  CheckExrHeader(name);
+  // Read with checked system calls (a failing disk is an I/O error, not a corrupt image), then
+  // decoded from memory.
+  std::string bytes = ReadFileBytes(path, "image");
+  CheckExrHeader(name, bytes);
   // Measurement data: a 4th channel is data, never premultiplied alpha to be (un)associated.
   OIIO::ImageSpec config;
   config.attribute("oiio:UnassociatedAlpha", 1);
-  auto in = OIIO::ImageInput::open(name, &config);
-  if (!in) ThrowBadInput("cannot read image '{}': {}", name, OIIO::geterror());
+  OIIO::Filesystem::IOMemReader proxy(bytes.data(), bytes.size());
+  OIIO::ImageSpec proxy_config = config;  // OpenImageIO 2.4 readers take the proxy from the config at open
+  void* proxy_ptr = &proxy;
+  proxy_config.attribute("oiio:ioproxy", OIIO::TypeDesc::PTR, &proxy_ptr);
+  // The reader is chosen by the extension and given the bytes; OpenImageIO 2.4's open(name, ...)
+  // would read the file again from disk. Formats without I/O proxies, or unknown extensions, are
+  // opened from the file.
+  std::string format = Lower(path.extension().string());
+  if (!format.empty()) format.erase(0, 1);
+  auto in = format.empty() ? nullptr : OIIO::ImageInput::create(format, false, &proxy_config, &proxy);
+  OIIO::ImageSpec opened;
+  if (in && in->supports("ioproxy")) {
+    if (!in->open(name, opened, proxy_config)) ThrowBadInput("cannot read image '{}': {}", name, in->geterror());
+  } else {
+    in = OIIO::ImageInput::open(name, &config);
+    if (!in) ThrowBadInput("cannot read image '{}': {}", name, OIIO::geterror());
+  }
   const OIIO::ImageSpec& spec = in->spec();
   if (spec.width < 1 || spec.height < 1 || spec.nchannels < 1)
     ThrowBadInput("image '{}' has an invalid size {}x{}x{}", name, spec.width, spec.height, spec.nchannels);
@@ -127,11 +145,23 @@ void WriteImage(const std::filesystem::path& path, const Image& image, const Ima
   spec.alpha_channel = -1;
   spec.attribute("oiio:UnassociatedAlpha", 1);
   if (ext == ".exr") spec.attribute("compression", "zip");
-  AtomicOutput out(path);
-  auto writer = OIIO::ImageOutput::create(out.temp_path().string());
+  auto writer = OIIO::ImageOutput::create(path.string());
   if (!writer) ThrowUsage("cannot write image '{}': unsupported file type '{}'", path.string(), ext);
+  // Encoded in memory, then written by WriteFileAtomic, whose every write is checked: OpenImageIO
+  // 2.4 does not check the buffered writes its file layer flushes at close (a full disk would
+  // pass unnoticed). Formats without I/O proxies are written to a temporary file directly.
+  if (writer->supports("ioproxy")) {
+    std::vector<unsigned char> bytes;
+    OIIO::Filesystem::IOVecOutput proxy(bytes);
+    if (!writer->set_ioproxy(&proxy) || !writer->open(path.string(), spec) ||
+        !writer->write_image(OIIO::TypeDesc::FLOAT, buf.data()) || !writer->close() || writer->has_error())
+      ThrowIo("cannot encode image '{}': {}", path.string(), writer->geterror());
+    WriteFileAtomic(path, bytes.data(), bytes.size());
+    return;
+  }
+  AtomicOutput out(path);
   if (!writer->open(out.temp_path().string(), spec) || !writer->write_image(OIIO::TypeDesc::FLOAT, buf.data()) ||
-      !writer->close())
+      !writer->close() || writer->has_error())
     ThrowIo("cannot write image '{}': {}", path.string(), writer->geterror());
   out.Commit();
 }

@@ -21,10 +21,9 @@ constexpr const char* kRigVersion = "1.0.0";
 constexpr int kRigMajor = 1;
 
 json LoadJson(const std::filesystem::path& path) {
-  std::ifstream in(path);
-  if (!in) ThrowIo("cannot open '{}': check that the file exists and is readable", path.string());
+  const std::string text = ReadFileBytes(path, "JSON file");
   try {
-    return json::parse(in);
+    return json::parse(text);
   } catch (const json::exception& e) {
     ThrowBadInput("'{}': not valid JSON ({})", path.string(), e.what());
   }

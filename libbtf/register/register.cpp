@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <exception>
 #include <map>
 #include <mutex>
 #include <set>
@@ -24,7 +25,11 @@ using json = nlohmann::json;
 
 
 // Reads a photo; non-finite values become 0 (counted in a warning) so nothing non-finite escapes.
+// A photo named by the manifest but missing is the manifest's problem (bad input, reported per
+// photo); one that exists and cannot be read is a failing disk (I/O: ends the run).
 Image ReadPhoto(const std::filesystem::path& path, std::vector<std::string>* warnings) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) ThrowBadInput("'{}': no such photo file", path.string());
   Image im = ReadImage(path);
   if (im.width < 2 || im.height < 2 || im.channels < 1) ThrowBadInput("'{}': empty image", path.string());
   std::size_t bad = 0;
@@ -255,12 +260,14 @@ class Registration {
       } catch (const Error& ex) {
         r.ok = false;
         r.error = ex.what();
+        if (ex.code() == ExitCode::kIo) KeepIoError();
       } catch (const std::exception& ex) {
         r.ok = false;
         r.error = fmt::format("internal error: {}", ex.what());
       }
       Progress("detect", np);
     }
+    RethrowIoError();
     if (cancelled_) throw Cancelled();
   }
 
@@ -391,9 +398,11 @@ class Registration {
         r.ok = false;
         r.error = ex.what();
         tex[k] = Image();
+        if (const auto* e = dynamic_cast<const Error*>(&ex); e && e->code() == ExitCode::kIo) KeepIoError();
       }
       Progress("rectify", n_ok);
     }
+    RethrowIoError();
     if (cancelled_) throw Cancelled();
     std::map<int, const Image*> by_light;
     for (std::size_t k = 0; k < photos.size(); ++k)
@@ -508,6 +517,18 @@ class Registration {
     if (o_.contact_sheet_thumb > 0 && brightest) thumbs_[vi] = Thumbnail(*brightest, o_.contact_sheet_thumb);
   }
 
+  // A photo that cannot be read (a failing disk, not a bad photo) ends the run with an I/O error
+  // (exit 4) instead of being left out: called in a catch block of a parallel loop; the loop's
+  // remaining iterations are skipped and RethrowIoError() after it throws the first one.
+  void KeepIoError() {
+    std::lock_guard<std::mutex> lock(progress_mutex_);
+    if (!io_error_) io_error_ = std::current_exception();
+    cancelled_ = true;
+  }
+  void RethrowIoError() {
+    if (io_error_) std::rethrow_exception(io_error_);
+  }
+
   // Thread-safe progress from parallel loops; a cancellation stops the remaining iterations.
   void Progress(const char* stage, int total) {
     const int d = ++done_;
@@ -538,6 +559,7 @@ class Registration {
   std::unique_ptr<DatasetWriter> writer_;
   std::vector<Image> thumbs_;
   std::atomic<bool> cancelled_{false};
+  std::exception_ptr io_error_;
   std::atomic<int> done_{0};
   std::mutex progress_mutex_;
 };

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "libbtf/core/atomic_file.h"
 #include "libbtf/core/error.h"
 #include "libbtf/synth/apriltag_render.h"
 #include "libbtf/synth/btf_generator.h"
@@ -275,13 +276,11 @@ std::vector<std::pair<int, int>> SelectPhotos(const PhotoOptions& o) {
   return out;
 }
 
-PhotoSummary SynthesizePhotos(const PhotoOptions& o, const SvbrdfModel& model, const std::filesystem::path& dir,
+PhotoSummary SynthesizePhotos(const PhotoOptions& o, const SvbrdfModel& model, const std::filesystem::path& out_dir,
                               const Reporter& reporter, const nlohmann::json& extra) {
   o.Check();
-  std::error_code ec;
-  std::filesystem::create_directories(dir, ec);
-  if (!std::filesystem::is_directory(dir))
-    ThrowIo("cannot create output folder '{}': {}", dir.string(), ec ? ec.message() : "not a folder");
+  AtomicDirectory output(out_dir, "manifest.json");
+  const std::filesystem::path& dir = output.temp_path();
   const Board board = MakeBoard(o, model.tile_size_mm());
   const auto pairs = SelectPhotos(o);
   for (const auto& [v, l] : pairs) MakeCamera(o, board, o.views[v]);  // fail fast on impossible views
@@ -366,7 +365,8 @@ PhotoSummary SynthesizePhotos(const PhotoOptions& o, const SvbrdfModel& model, c
   reporter.Progress(pairs.size(), pairs.size(), "photos");
   WriteBoard(dir / "board.json", board);
   WriteTruth(dir / "truth.json", truth);
-  WriteManifest(dir / "manifest.json", manifest);  // last: its presence means the set is complete
+  WriteManifest(dir / "manifest.json", manifest);
+  output.Commit();
   summary.photos = static_cast<int>(pairs.size());
   summary.times = times;
   return summary;

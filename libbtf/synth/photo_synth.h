@@ -81,7 +81,8 @@ Image RenderPhoto(const SvbrdfModel& model, const Board& board, const PhotoOptio
 // The (view index, light index) pairs to shoot: the subsets, then the even spread.
 std::vector<std::pair<int, int>> SelectPhotos(const PhotoOptions& options);
 
-// Renders and writes the whole set into `dir` (created if missing). Each file atomically.
+// Renders and writes the whole set into the folder `dir`, atomically as a whole (AtomicDirectory:
+// an existing earlier set is replaced only once the new one is complete).
 PhotoSummary SynthesizePhotos(const PhotoOptions& options, const SvbrdfModel& model, const std::filesystem::path& dir,
                               const Reporter& reporter = {}, const nlohmann::json& extra = {});
 

@@ -9,6 +9,7 @@
 #include <fmt/format.h>
 
 #include "libbtf/core/directions.h"
+#include "libbtf/core/atomic_file.h"
 #include "libbtf/core/error.h"
 
 namespace btf {
@@ -601,12 +602,7 @@ WeavePattern ParseWeavePattern(const std::string& text, const std::string& sourc
 }
 
 WeavePattern LoadWeavePattern(const std::filesystem::path& path, const nlohmann::json& variables) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) ThrowIo("cannot open weave pattern file '{}' (check the path)", path.string());
-  std::stringstream ss;
-  ss << in.rdbuf();
-  if (in.bad()) ThrowIo("cannot read weave pattern file '{}'", path.string());
-  return ParseWeavePattern(ss.str(), path.string(), variables);
+  return ParseWeavePattern(ReadFileBytes(path, "weave pattern file"), path.string(), variables);
 }
 
 std::string FormatWeavePattern(const WeavePattern& p) {

@@ -65,7 +65,7 @@ TEST(DatasetIo, PartialReadsMatchTheWholeDataset) {
   EXPECT_THROW(reader.ReadImage(3, 0, img.data()), Error);  // out of range view
 }
 
-TEST(DatasetIo, DatasetIsChunkedPerImageWithShuffleAndDeflate) {
+TEST(DatasetIo, DatasetIsChunkedPerImageWithShuffleDeflateAndChecksums) {
   const auto path = test::TempDir() / "c.h5";
   WriteDataset(path, SmallDataset());
   const h5::File f = h5::File::Open(path);
@@ -77,7 +77,14 @@ TEST(DatasetIo, DatasetIsChunkedPerImageWithShuffleAndDeflate) {
   EXPECT_EQ(chunk[1], 1u);
   EXPECT_EQ(chunk[2], 5u);
   EXPECT_EQ(chunk[3], 6u);
-  EXPECT_EQ(H5Pget_nfilters(dcpl.id()), 2);
+  ASSERT_EQ(H5Pget_nfilters(dcpl.id()), 3);
+  std::vector<H5Z_filter_t> filters;
+  for (unsigned i = 0; i < 3; ++i) {
+    unsigned flags = 0, config = 0;
+    std::size_t n = 0;
+    filters.push_back(H5Pget_filter2(dcpl.id(), i, &flags, &n, nullptr, 0, nullptr, &config));
+  }
+  EXPECT_EQ(filters, (std::vector<H5Z_filter_t>{H5Z_FILTER_SHUFFLE, H5Z_FILTER_DEFLATE, H5Z_FILTER_FLETCHER32}));
   EXPECT_EQ(f.GetString("/btf/data", "dimension_names"), "view,light,y,x,channel");
 }
 

@@ -40,8 +40,9 @@ void CheckSeconds(const nlohmann::json& seconds, const std::string& what) {
     EXPECT_GE(v.get<double>(), 0) << what << " " << k;
     if (k != "total") sum += v.get<double>();
   }
-  if (seconds.size() > 1)  // phases and their total (a bare {"total": s} has no phases)
+  if (seconds.size() > 1) {  // phases and their total (a bare {"total": s} has no phases)
     EXPECT_NEAR(seconds["total"].get<double>(), sum, 1e-9 + 1e-12 * sum) << what;
+  }
 }
 
 TEST(ToolConventions, EveryJsonDocumentHasTheEnvelopeAndTimingSchema) {

@@ -108,7 +108,7 @@ int main(int argc, char** argv) {
   auto* sweep = app.add_subcommand("sweep", "Compress DATASET with each setting; error against size and run time; "
                                             "results.json, plots and report.html in DIR");
   sweep->add_option("DATASET", sf.dataset, "Dataset file (read into memory)")->required();
-  sweep->add_option("-o,--output", sf.output, "Output folder (created if missing)")->required();
+  sweep->add_option("-o,--output", sf.output, "Output folder (replaced as a whole when complete)")->required();
   sweep->add_option("--methods", so.methods, "Comma-separated codec methods")->delimiter(',');
   sweep->add_option("--components", so.components, "Components c to try (comma-separated, e.g. 1,2,4)")->delimiter(',');
   sweep->add_option("--clusters", so.clusters, "Cluster counts k to try (lpca, comma-separated)")->delimiter(',');

@@ -1,4 +1,7 @@
 // btf-register: fiducial registration of measurement photos into a BTF dataset (docs/btf-register.md).
+#include <optional>
+#include <vector>
+
 #include <fmt/format.h>
 
 #include "libbtf/core/atomic_file.h"
@@ -56,16 +59,29 @@ int RunRegister(const CLI::App& app, const btf::cli::CommonFlags& common, RunFla
   if (!f.family.empty()) ro.detector.family = f.family, ro.family_override = true;
   if (f.half) ro.write.storage = btf::h5::Storage::kFloat16;
   ro.Check();
-  const btf::RegisterSummary sum = btf::RegisterPhotos(ro, f.manifest, f.output, btf::cli::MakeReporter(common));
+  // The dataset, report and contact sheet are all written under temporary names first and renamed
+  // together at the end, so a failure in any of them leaves every earlier output as it was.
+  btf::AtomicOutput data_out(f.output);
+  const btf::RegisterSummary sum =
+      btf::RegisterPhotos(ro, f.manifest, data_out.temp_path(), btf::cli::MakeReporter(common));
   const nlohmann::json report = sum.ToJson();
-  if (!f.report.empty()) btf::WriteTextFileAtomic(f.report, btf::cli::JsonDocument(app, report).dump(2) + "\n");
+  std::optional<btf::AtomicOutput> report_out, sheet_out;
+  if (!f.report.empty()) {
+    report_out.emplace(f.report);
+    btf::WriteTextFileAtomic(report_out->temp_path(), btf::cli::JsonDocument(app, report).dump(2) + "\n");
+  }
   if (!f.sheet.empty() && sum.contact_sheet.width > 0) {
     btf::ImageWriteOptions wo;
     wo.has_format = true;
     wo.format = btf::PixelFormat::kUint8;
     wo.srgb = true;
-    btf::WriteImage(f.sheet, sum.contact_sheet, wo);
+    sheet_out.emplace(f.sheet);
+    btf::WriteImage(sheet_out->temp_path(), sum.contact_sheet, wo);
   }
+  std::vector<btf::AtomicOutput*> outputs = {&data_out};
+  if (report_out) outputs.push_back(&*report_out);
+  if (sheet_out) outputs.push_back(&*sheet_out);
+  btf::AtomicOutput::CommitTogether(outputs);
   nlohmann::json failures = nlohmann::json::array();
   for (const auto& r : sum.reports)
     if (!r.ok) failures.push_back({{"file", r.file}, {"error", r.error}});

@@ -12,6 +12,7 @@
 
 #include "libbtf/core/atomic_file.h"
 #include "libbtf/core/error.h"
+#include "libbtf/io/hdf5.h"
 #include "libbtf/core/version.h"
 
 namespace btf::cli {
@@ -185,6 +186,12 @@ int Main(int argc, char** argv, CLI::App& app, const std::function<int()>& run) 
     }
     return run();
   } catch (const Error& e) {
+    // A file read as damaged after a failed read system call is a failing disk, not bad data.
+    if (e.code() == ExitCode::kBadInput && h5::IoErrorSeen()) {
+      std::fprintf(stderr, "%s: error: %s (after an I/O error reading it: failing disk or network file system?)\n",
+                   app.get_name().c_str(), e.what());
+      return static_cast<int>(ExitCode::kIo);
+    }
     if (e.code() == ExitCode::kInternal)
       std::fprintf(stderr, "%s: internal error: %s (please report this)\n", app.get_name().c_str(), e.what());
     else
