@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
+#include <cstdlib>
 #include <functional>
 
 #include <Eigen/Eigenvalues>
@@ -18,8 +19,14 @@
 #include <apriltag/tagCustom48h12.h>
 #include <apriltag/tagStandard41h12.h>
 #include <apriltag/tagStandard52h13.h>
+#include <opencv2/aruco.hpp>
+#include <opencv2/core.hpp>
 
 #include "libbtf/core/error.h"
+
+// Exported by Debian's libapriltag 3.3 (and declared only in its sources): the quad stage alone.
+// Returns a zarray of struct quad (corners only; H and Hinv are still null).
+extern "C" zarray_t* apriltag_quad_thresh(apriltag_detector_t* td, image_u8_t* im);
 
 namespace btf {
 namespace {
@@ -46,18 +53,82 @@ const std::vector<FamilyEntry>& Families() {
   return f;
 }
 
+struct ArucoEntry {
+  const char* name;
+  int dict;
+};
+const std::vector<ArucoEntry>& ArucoDictionaries() {
+  namespace a = cv::aruco;
+  static const std::vector<ArucoEntry> d = {
+      {"DICT_4X4_50", a::DICT_4X4_50},         {"DICT_4X4_100", a::DICT_4X4_100},
+      {"DICT_4X4_250", a::DICT_4X4_250},       {"DICT_4X4_1000", a::DICT_4X4_1000},
+      {"DICT_5X5_50", a::DICT_5X5_50},         {"DICT_5X5_100", a::DICT_5X5_100},
+      {"DICT_5X5_250", a::DICT_5X5_250},       {"DICT_5X5_1000", a::DICT_5X5_1000},
+      {"DICT_6X6_50", a::DICT_6X6_50},         {"DICT_6X6_100", a::DICT_6X6_100},
+      {"DICT_6X6_250", a::DICT_6X6_250},       {"DICT_6X6_1000", a::DICT_6X6_1000},
+      {"DICT_7X7_50", a::DICT_7X7_50},         {"DICT_7X7_100", a::DICT_7X7_100},
+      {"DICT_7X7_250", a::DICT_7X7_250},       {"DICT_7X7_1000", a::DICT_7X7_1000},
+      {"DICT_ARUCO_ORIGINAL", a::DICT_ARUCO_ORIGINAL}, {"DICT_APRILTAG_16h5", a::DICT_APRILTAG_16h5},
+      {"DICT_APRILTAG_25h9", a::DICT_APRILTAG_25h9},   {"DICT_APRILTAG_36h10", a::DICT_APRILTAG_36h10},
+      {"DICT_APRILTAG_36h11", a::DICT_APRILTAG_36h11},
+  };
+  return d;
+}
+constexpr const char* kArucoPrefix = "aruco:";
+
+std::string KnownFamilies() {
+  std::string known;
+  for (const auto& e : Families()) known += std::string(known.empty() ? "" : ", ") + e.name;
+  return known + ", or aruco:DICT_4X4_50 .. aruco:DICT_APRILTAG_36h11 (OpenCV's predefined dictionaries)";
+}
+
 const FamilyEntry& FindFamily(const std::string& name) {
   for (const auto& e : Families())
     if (name == e.name) return e;
-  std::string known;
-  for (const auto& e : Families()) known += std::string(known.empty() ? "" : ", ") + e.name;
-  ThrowUsage("unknown tag family '{}': use one of {}", name, known);
+  ThrowUsage("unknown tag family '{}': use one of {}", name, KnownFamilies());
+}
+
+int FindAruco(const std::string& family) {
+  const std::string name = family.substr(std::string(kArucoPrefix).size());
+  for (const auto& e : ArucoDictionaries())
+    if (name == e.name) return e.dict;
+  ThrowUsage("unknown ArUco dictionary '{}': use one of {}", family, KnownFamilies());
+}
+
+// Families whose black border is the outer ring of the detection square (every data bit inside
+// it): only these can carry a wider border.
+bool ClassicFamily(const std::string& name) {
+  return name == "tag16h5" || name == "tag25h9" || name == "tag36h10" || name == "tag36h11";
 }
 
 }  // namespace
 
+bool IsArucoFamily(const std::string& family) { return family.rfind(kArucoPrefix, 0) == 0; }
+
+int DetectionSquareModules(const std::string& family, int border_bits) {
+  if (IsArucoFamily(family)) {
+    const cv::Ptr<cv::aruco::Dictionary> d =
+        cv::aruco::getPredefinedDictionary(static_cast<cv::aruco::PREDEFINED_DICTIONARY_NAME>(FindAruco(family)));
+    return d->markerSize + 2 * border_bits;
+  }
+  const FamilyEntry& e = FindFamily(family);
+  apriltag_family_t* f = e.create();
+  const int w = f->width_at_border + 2 * (border_bits - 1);
+  e.destroy(f);
+  return w;
+}
+
 void TagDetectorOptions::Check() const {
-  FindFamily(family);
+  if (IsArucoFamily(family)) {
+    FindAruco(family);
+  } else {
+    FindFamily(family);
+    if (border_bits != 1 && !ClassicFamily(family))
+      ThrowUsage("invalid option 'border_bits': {} has data bits outside its border ring; a {}-bit border is "
+                 "supported for tag16h5, tag25h9, tag36h10 and tag36h11 only",
+                 family, border_bits);
+  }
+  BTF_CHECK_OPTION(border_bits >= 1 && border_bits <= 2, "border_bits", "1 or 2");
   BTF_CHECK_OPTION(bits_corrected >= 0 && bits_corrected <= 3, "bits_corrected", "0..3");
   BTF_CHECK_OPTION(quad_decimate >= 1 && quad_decimate <= 8, "quad_decimate", "1..8");
   BTF_CHECK_OPTION(decode_sharpening >= 0 && decode_sharpening <= 4, "decode_sharpening", "0..4");
@@ -69,13 +140,23 @@ void TagDetectorOptions::Check() const {
 std::vector<std::string> TagFamilies() {
   std::vector<std::string> names;
   for (const auto& e : Families()) names.emplace_back(e.name);
+  for (const auto& e : ArucoDictionaries()) names.push_back(std::string(kArucoPrefix) + e.name);
   return names;
 }
 
 struct TagDetector::Impl {
   const FamilyEntry* entry = nullptr;
   apriltag_family_t* family = nullptr;
+  // A wider border: a copy of the family with the detection square border_bits - 1 modules wider
+  // on each side and the data bits shifted inwards by as much (codes shared with `family`).
+  apriltag_family_t wide{};
+  std::vector<std::uint32_t> wide_x, wide_y;
+  std::string wide_name;
   apriltag_detector_t* detector = nullptr;
+  // ArUco (OpenCV): dictionary and parameters; width = modules across the detection square.
+  cv::Ptr<cv::aruco::Dictionary> aruco;
+  cv::Ptr<cv::aruco::DetectorParameters> aruco_params;
+  int modules = 0;
   ~Impl() {
     // The detector references the family: destroy it first (notes 1.1).
     if (detector) apriltag_detector_destroy(detector);
@@ -85,13 +166,40 @@ struct TagDetector::Impl {
 
 TagDetector::TagDetector(const TagDetectorOptions& options) : impl_(std::make_unique<Impl>()), options_(options) {
   options_.Check();
+  if (IsArucoFamily(options_.family)) {
+    impl_->aruco = cv::aruco::getPredefinedDictionary(
+        static_cast<cv::aruco::PREDEFINED_DICTIONARY_NAME>(FindAruco(options_.family)));
+    impl_->aruco_params = cv::aruco::DetectorParameters::create();
+    impl_->aruco_params->markerBorderBits = options_.border_bits;
+    impl_->aruco_params->cornerRefinementMethod = cv::aruco::CORNER_REFINE_NONE;  // our edge fit refines
+    impl_->modules = impl_->aruco->markerSize + 2 * options_.border_bits;
+    return;
+  }
   impl_->entry = &FindFamily(options_.family);
   impl_->family = impl_->entry->create();
   impl_->detector = apriltag_detector_create();
   if (!impl_->family || !impl_->detector) throw Error(ExitCode::kInternal, "libapriltag: cannot create the detector");
+  apriltag_family_t* used = impl_->family;
+  if (options_.border_bits > 1) {
+    const int extra = options_.border_bits - 1;
+    Impl& m = *impl_;
+    m.wide = *m.family;
+    m.wide.width_at_border += 2 * extra;
+    m.wide.total_width += 2 * extra;
+    m.wide_x.assign(m.family->bit_x, m.family->bit_x + m.family->nbits);
+    m.wide_y.assign(m.family->bit_y, m.family->bit_y + m.family->nbits);
+    for (auto& v : m.wide_x) v += static_cast<std::uint32_t>(extra);
+    for (auto& v : m.wide_y) v += static_cast<std::uint32_t>(extra);
+    m.wide.bit_x = m.wide_x.data();
+    m.wide.bit_y = m.wide_y.data();
+    m.wide_name = fmt::format("{}b{}", m.family->name, options_.border_bits);
+    m.wide.name = m.wide_name.data();
+    m.wide.impl = nullptr;  // the decode table: built by add_family_bits, freed by the detector
+    used = &m.wide;
+  }
+  impl_->modules = used->width_at_border;
   errno = 0;
-  apriltag_detector_add_family_bits(impl_->detector, impl_->family,
-                                    std::min(options_.bits_corrected, impl_->entry->max_bits));
+  apriltag_detector_add_family_bits(impl_->detector, used, std::min(options_.bits_corrected, impl_->entry->max_bits));
   if (errno == ENOMEM)
     throw Error(ExitCode::kInternal,
                 fmt::format("libapriltag: out of memory building the decode table of {} with {} bits: lower "
@@ -108,6 +216,7 @@ TagDetector::~TagDetector() = default;
 
 std::vector<TagDetection> TagDetector::Detect(const unsigned char* gray, int width, int height, int stride) const {
   if (width < 1 || height < 1 || stride < width) ThrowBadInput("tag detection: bad image size {}x{}", width, height);
+  if (impl_->aruco) return DetectAruco(gray, width, height, stride);
   // AprilTag reads the buffer only (quad_sigma is 0); its struct wants a non-const pointer.
   image_u8_t im{width, height, stride, const_cast<unsigned char*>(gray)};
   errno = 0;
@@ -134,6 +243,37 @@ std::vector<TagDetection> TagDetector::Detect(const unsigned char* gray, int wid
     if (inside) out.push_back(t);  // border-cut tags can decode with wrong corners (notes 1.5)
   }
   apriltag_detections_destroy(dets);
+  std::sort(out.begin(), out.end(), [](const TagDetection& a, const TagDetection& b) { return a.id < b.id; });
+  return out;
+}
+
+std::vector<TagDetection> TagDetector::DetectAruco(const unsigned char* gray, int width, int height, int stride) const {
+  const cv::Mat im(height, width, CV_8UC1, const_cast<unsigned char*>(gray), static_cast<std::size_t>(stride));
+  std::vector<std::vector<cv::Point2f>> corners;
+  std::vector<int> ids;
+  cv::aruco::detectMarkers(im, impl_->aruco, corners, ids, impl_->aruco_params);
+  std::vector<TagDetection> out;
+  // OpenCV's order is clockwise from the marker's top-left (TL, TR, BR, BL), pixel centers at
+  // integers (no shift). Ours is LB, RB, RT, LT of the upright marker. OpenCV 4.6 draws its
+  // DICT_APRILTAG_* markers rotated by 180 degrees relative to apriltag-imgs (notes 1.3), so for
+  // those the upright printed tag's LB is OpenCV's TR.
+  const bool apriltag_dict = options_.family.find("APRILTAG") != std::string::npos;
+  const std::array<int, 4> order = apriltag_dict ? std::array<int, 4>{1, 0, 3, 2} : std::array<int, 4>{3, 2, 1, 0};
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    TagDetection t;
+    t.id = ids[i];
+    bool inside = true;
+    Vec2 c = Vec2::Zero();
+    for (int k = 0; k < 4; ++k) {
+      const cv::Point2f& p = corners[i][static_cast<std::size_t>(order[static_cast<std::size_t>(k)])];
+      t.corners[k] = Vec2(p.x, p.y);
+      c += 0.25 * t.corners[k];
+      const double m = options_.border_margin_px;
+      if (!(p.x >= m && p.y >= m && p.x <= width - 1 - m && p.y <= height - 1 - m)) inside = false;
+    }
+    t.center = c;
+    if (inside) out.push_back(t);
+  }
   std::sort(out.begin(), out.end(), [](const TagDetection& a, const TagDetection& b) { return a.id < b.id; });
   return out;
 }
@@ -177,6 +317,8 @@ double Bilinear(const std::vector<float>& g, int w, int h, double x, double y, b
 }  // namespace
 
 std::vector<unsigned char> GrayForDetection(const Image& image) { return Quantize(LinearGray(image)); }
+
+
 
 bool RefineTagCorners(const std::vector<float>& gray, int w, int h, int modules, std::array<Vec2, 4>* corners) {
   if (w < 2 || h < 2) return false;
@@ -250,10 +392,63 @@ std::vector<TagDetection> TagDetector::Detect(const Image& image) const {
   const std::vector<float> gray = LinearGray(image);
   const std::vector<unsigned char> gray8 = Quantize(gray);
   std::vector<TagDetection> dets = Detect(gray8.data(), image.width, image.height, image.width);
+  if (options_.split_touching && options_.border_bits >= 2 && !impl_->aruco) {
+    // Kalibr's corner squares touch the tags diagonally; wherever the thresholded image joins them
+    // (or splits the white gaps at the joints), libapriltag's segmentation finds no quad for the tag.
+    const int w = image.width, h = image.height;
+    // 1. Dark regions eroded by a 3 x 3 maximum (symmetric: no shift): the joints open, libapriltag
+    //    finds the quads, but thin data modules may erode away, so the ids are not trusted yet.
+    std::vector<unsigned char> eroded(gray8.size());
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        unsigned char v = 0;
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx)
+            v = std::max(v, gray8[static_cast<std::size_t>(std::clamp(y + dy, 0, h - 1)) * w + std::clamp(x + dx, 0, w - 1)]);
+        eroded[static_cast<std::size_t>(y) * w + x] = v;
+      }
+    // 2. Inside each quad found there (shrunk by one module towards its centre, away from the
+    //    joints at its corners) the original pixels go back, and the hybrid is decoded as usual;
+    //    only ids the first pass missed are added. The quads' corners are 1 px inside the true ones
+    //    at most; our edge fit (on the original linear image) moves them.
+    std::vector<unsigned char> hybrid = eroded;
+    image_u8_t eim{w, h, w, eroded.data()};
+    zarray_t* quads = apriltag_quad_thresh(impl_->detector, &eim);
+    if (!quads) throw Error(ExitCode::kInternal, "libapriltag: quad detection failed");
+    for (int i = 0; i < zarray_size(quads); ++i) {
+      struct quad* q = nullptr;
+      zarray_get_volatile(quads, i, &q);
+      std::array<Vec2, 4> c;
+      Vec2 m = Vec2::Zero();
+      for (int k = 0; k < 4; ++k) m += 0.25 * (c[k] = Vec2(q->p[k][0], q->p[k][1]));
+      for (int k = 0; k < 4; ++k) c[k] = m + (1.0 - 2.0 / impl_->modules) * (c[k] - m);
+      double x0 = w, x1 = 0, y0 = h, y1 = 0;
+      for (const auto& p : c) x0 = std::min(x0, p.x()), x1 = std::max(x1, p.x()), y0 = std::min(y0, p.y()), y1 = std::max(y1, p.y());
+      for (int y = std::max(0, static_cast<int>(y0)); y <= std::min(h - 1, static_cast<int>(y1)); ++y)
+        for (int x = std::max(0, static_cast<int>(x0)); x <= std::min(w - 1, static_cast<int>(x1)); ++x) {
+          const Vec2 p(x + 0.5, y + 0.5);  // AprilTag's pixel convention, as its quads
+          int sign = 0;
+          bool inside = true;
+          for (int k = 0; k < 4 && inside; ++k) {
+            const Vec2 e = c[(k + 1) % 4] - c[k], r = p - c[k];
+            const int s = e.x() * r.y() - e.y() * r.x() > 0 ? 1 : -1;
+            if (sign == 0) sign = s;
+            inside = s == sign;
+          }
+          if (inside) hybrid[static_cast<std::size_t>(y) * w + x] = gray8[static_cast<std::size_t>(y) * w + x];
+        }
+      std::free(q->H);  // null here; a 3.3 matd_t is one calloc block (notes 1.1)
+      std::free(q->Hinv);
+    }
+    zarray_destroy(quads);
+    for (auto& d : Detect(hybrid.data(), w, h, w))
+      if (std::none_of(dets.begin(), dets.end(), [&](const TagDetection& e) { return e.id == d.id; })) dets.push_back(d);
+    std::sort(dets.begin(), dets.end(), [](const TagDetection& a, const TagDetection& b) { return a.id < b.id; });
+  }
   if (options_.refine_corners)
     for (auto& d : dets) {
       std::array<Vec2, 4> c = d.corners;
-      if (RefineTagCorners(gray, image.width, image.height, impl_->family->width_at_border, &c)) d.corners = c;
+      if (RefineTagCorners(gray, image.width, image.height, impl_->modules, &c)) d.corners = c;
     }
   return dets;
 }
