@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <functional>
+#include <tuple>
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
@@ -21,6 +22,7 @@
 #include <apriltag/tagStandard52h13.h>
 #include <opencv2/aruco.hpp>
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "libbtf/core/error.h"
 
@@ -157,6 +159,7 @@ struct TagDetector::Impl {
   cv::Ptr<cv::aruco::Dictionary> aruco;
   cv::Ptr<cv::aruco::DetectorParameters> aruco_params;
   int modules = 0;
+  const apriltag_family_t* used = nullptr;  // the family libapriltag decodes (the wide copy or the original)
   ~Impl() {
     // The detector references the family: destroy it first (notes 1.1).
     if (detector) apriltag_detector_destroy(detector);
@@ -198,6 +201,7 @@ TagDetector::TagDetector(const TagDetectorOptions& options) : impl_(std::make_un
     used = &m.wide;
   }
   impl_->modules = used->width_at_border;
+  impl_->used = used;
   errno = 0;
   apriltag_detector_add_family_bits(impl_->detector, used, std::min(options_.bits_corrected, impl_->entry->max_bits));
   if (errno == ENOMEM)
@@ -245,6 +249,93 @@ std::vector<TagDetection> TagDetector::Detect(const unsigned char* gray, int wid
   apriltag_detections_destroy(dets);
   std::sort(out.begin(), out.end(), [](const TagDetection& a, const TagDetection& b) { return a.id < b.id; });
   return out;
+}
+
+bool TagDetector::DecodeQuad(const std::vector<unsigned char>& gray, int w, int h, std::array<Vec2, 4> q,
+                             TagDetection* out) const {
+  const apriltag_family_t& f = *impl_->used;
+  const double W = impl_->modules;
+  // Tag frame (modules, u right, v down, (0,0) = top-left of the detection square) -> AprilTag
+  // pixels, with the quad's corners as TL, TR, BR, BL; reversed if that order is mirrored on screen.
+  const Vec2 e1 = q[1] - q[0], e2 = q[3] - q[0];
+  if (e1.x() * e2.y() - e1.y() * e2.x() < 0) std::swap(q[1], q[3]);
+  cv::Mat H = cv::getPerspectiveTransform(
+      std::vector<cv::Point2f>{{0, 0}, {static_cast<float>(W), 0}, {static_cast<float>(W), static_cast<float>(W)},
+                               {0, static_cast<float>(W)}},
+      std::vector<cv::Point2f>{{static_cast<float>(q[0].x()), static_cast<float>(q[0].y())},
+                               {static_cast<float>(q[1].x()), static_cast<float>(q[1].y())},
+                               {static_cast<float>(q[2].x()), static_cast<float>(q[2].y())},
+                               {static_cast<float>(q[3].x()), static_cast<float>(q[3].y())}});
+  const auto map = [&](double u, double v) {
+    const double x = H.at<double>(0, 0) * u + H.at<double>(0, 1) * v + H.at<double>(0, 2);
+    const double y = H.at<double>(1, 0) * u + H.at<double>(1, 1) * v + H.at<double>(1, 2);
+    const double z = H.at<double>(2, 0) * u + H.at<double>(2, 1) * v + H.at<double>(2, 2);
+    return Vec2(x / z, y / z);
+  };
+  bool ok = true;
+  const auto sample = [&](double u, double v) {  // bilinear on the 8-bit image, AprilTag pixel convention
+    const Vec2 p = map(u, v) - Vec2(0.5, 0.5);
+    if (!(p.x() >= 0 && p.y() >= 0 && p.x() <= w - 1 && p.y() <= h - 1)) {
+      ok = false;
+      return 0.0;
+    }
+    const int x0 = std::min(static_cast<int>(p.x()), w - 2), y0 = std::min(static_cast<int>(p.y()), h - 2);
+    const double fx = p.x() - x0, fy = p.y() - y0;
+    const unsigned char* r0 = &gray[static_cast<std::size_t>(y0) * w + x0];
+    const unsigned char* r1 = r0 + w;
+    return (1 - fy) * ((1 - fx) * r0[0] + fx * r0[1]) + fy * ((1 - fx) * r1[0] + fx * r1[1]);
+  };
+  // Black level: the border ring half a module inside; white: half a module outside.
+  double black = 0, white = 0;
+  int n = 0;
+  for (int k = 0; k < static_cast<int>(W); ++k) {
+    const double t = k + 0.5;
+    black += sample(t, 0.5) + sample(t, W - 0.5) + sample(0.5, t) + sample(W - 0.5, t);
+    white += sample(t, -0.5) + sample(t, W + 0.5) + sample(-0.5, t) + sample(W + 0.5, t);
+    n += 4;
+  }
+  if (!ok) return false;
+  black /= n, white /= n;
+  if (!(white - black > 20)) return false;
+  const double thr = 0.5 * (black + white);
+  // The code read in each of the 4 rotations of the tag frame; best match over the family.
+  int best_h = 99, best_id = -1, best_rot = 0;
+  double margin = 0;
+  for (int rot = 0; rot < 4; ++rot) {
+    std::uint64_t code = 0;
+    double m = 1e9;
+    for (std::uint32_t i = 0; i < f.nbits; ++i) {
+      double u = f.bit_x[i] + 0.5, v = f.bit_y[i] + 0.5;
+      for (int r = 0; r < rot; ++r) std::tie(u, v) = std::make_pair(W - v, u);  // 90 deg on screen
+      const double val = sample(u, v);
+      code = (code << 1) | (val > thr ? 1u : 0u);
+      m = std::min(m, std::abs(val - thr));
+    }
+    if (!ok) return false;
+    for (std::uint32_t id = 0; id < f.ncodes; ++id) {
+      const int hd = __builtin_popcountll(code ^ f.codes[id]);
+      if (hd < best_h) best_h = hd, best_id = static_cast<int>(id), best_rot = rot, margin = m;
+    }
+  }
+  if (best_id < 0 || best_h > options_.max_hamming || margin < options_.min_decision_margin / 4) return false;
+  // Corners of the upright tag (LB, RB, RT, LT in its frame) through the same rotation, into
+  // OpenCV's pixel convention.
+  const std::array<Vec2, 4> upright = {Vec2(0, W), Vec2(W, W), Vec2(W, 0), Vec2(0, 0)};
+  out->id = best_id;
+  out->hamming = best_h;
+  out->decision_margin = margin;
+  Vec2 centre = Vec2::Zero();
+  for (int k = 0; k < 4; ++k) {
+    double u = upright[static_cast<std::size_t>(k)].x(), v = upright[static_cast<std::size_t>(k)].y();
+    for (int r = 0; r < best_rot; ++r) std::tie(u, v) = std::make_pair(W - v, u);
+    out->corners[k] = map(u, v) - Vec2(0.5, 0.5);
+    centre += 0.25 * out->corners[k];
+    const double mg = options_.border_margin_px;
+    const Vec2& c = out->corners[k];
+    if (!(c.x() >= mg && c.y() >= mg && c.x() <= w - 1 - mg && c.y() <= h - 1 - mg)) return false;
+  }
+  out->center = centre;
+  return true;
 }
 
 std::vector<TagDetection> TagDetector::DetectAruco(const unsigned char* gray, int width, int height, int stride) const {
@@ -320,7 +411,8 @@ std::vector<unsigned char> GrayForDetection(const Image& image) { return Quantiz
 
 
 
-bool RefineTagCorners(const std::vector<float>& gray, int w, int h, int modules, std::array<Vec2, 4>* corners) {
+bool RefineTagCorners(const std::vector<float>& gray, int w, int h, int modules, std::array<Vec2, 4>* corners,
+                      double max_move_px) {
   if (w < 2 || h < 2) return false;
   for (int pass = 0; pass < 2; ++pass) {
     std::array<Vec2, 4>& c = *corners;
@@ -380,7 +472,7 @@ bool RefineTagCorners(const std::vector<float>& gray, int w, int h, int modules,
       const Eigen::Vector3d x = lines[(k + 3) % 4].cross(lines[k]);
       if (!(std::abs(x.z()) > 1e-12)) return false;
       refined[k] = x.head<2>() / x.z();
-      if (!refined[k].allFinite() || (refined[k] - c[k]).norm() > 3.0) return false;  // refinement must stay local
+      if (!refined[k].allFinite() || (refined[k] - c[k]).norm() > max_move_px) return false;  // must stay local
     }
     c = refined;
   }
@@ -398,20 +490,20 @@ std::vector<TagDetection> TagDetector::Detect(const Image& image) const {
     const int w = image.width, h = image.height;
     // 1. Dark regions eroded by a 3 x 3 maximum (symmetric: no shift): the joints open, libapriltag
     //    finds the quads, but thin data modules may erode away, so the ids are not trusted yet.
-    std::vector<unsigned char> eroded(gray8.size());
+    //    On the sRGB-encoded image: its brighter mid-tones open the joints further.
+    std::vector<unsigned char> encoded(gray8.size()), eroded(gray8.size());
+    for (std::size_t i = 0; i < gray8.size(); ++i)
+      encoded[i] = static_cast<unsigned char>(std::lround(255 * LinearToSrgb(gray8[i] / 255.0f)));
     for (int y = 0; y < h; ++y)
       for (int x = 0; x < w; ++x) {
         unsigned char v = 0;
         for (int dy = -1; dy <= 1; ++dy)
           for (int dx = -1; dx <= 1; ++dx)
-            v = std::max(v, gray8[static_cast<std::size_t>(std::clamp(y + dy, 0, h - 1)) * w + std::clamp(x + dx, 0, w - 1)]);
+            v = std::max(v, encoded[static_cast<std::size_t>(std::clamp(y + dy, 0, h - 1)) * w + std::clamp(x + dx, 0, w - 1)]);
         eroded[static_cast<std::size_t>(y) * w + x] = v;
       }
-    // 2. Inside each quad found there (shrunk by one module towards its centre, away from the
-    //    joints at its corners) the original pixels go back, and the hybrid is decoded as usual;
-    //    only ids the first pass missed are added. The quads' corners are 1 px inside the true ones
-    //    at most; our edge fit (on the original linear image) moves them.
-    std::vector<unsigned char> hybrid = eroded;
+    // 2. Each quad found there is decoded on the original image (DecodeQuad); only ids the first
+    //    pass missed are added.
     image_u8_t eim{w, h, w, eroded.data()};
     zarray_t* quads = apriltag_quad_thresh(impl_->detector, &eim);
     if (!quads) throw Error(ExitCode::kInternal, "libapriltag: quad detection failed");
@@ -419,30 +511,23 @@ std::vector<TagDetection> TagDetector::Detect(const Image& image) const {
       struct quad* q = nullptr;
       zarray_get_volatile(quads, i, &q);
       std::array<Vec2, 4> c;
-      Vec2 m = Vec2::Zero();
-      for (int k = 0; k < 4; ++k) m += 0.25 * (c[k] = Vec2(q->p[k][0], q->p[k][1]));
-      for (int k = 0; k < 4; ++k) c[k] = m + (1.0 - 2.0 / impl_->modules) * (c[k] - m);
-      double x0 = w, x1 = 0, y0 = h, y1 = 0;
-      for (const auto& p : c) x0 = std::min(x0, p.x()), x1 = std::max(x1, p.x()), y0 = std::min(y0, p.y()), y1 = std::max(y1, p.y());
-      for (int y = std::max(0, static_cast<int>(y0)); y <= std::min(h - 1, static_cast<int>(y1)); ++y)
-        for (int x = std::max(0, static_cast<int>(x0)); x <= std::min(w - 1, static_cast<int>(x1)); ++x) {
-          const Vec2 p(x + 0.5, y + 0.5);  // AprilTag's pixel convention, as its quads
-          int sign = 0;
-          bool inside = true;
-          for (int k = 0; k < 4 && inside; ++k) {
-            const Vec2 e = c[(k + 1) % 4] - c[k], r = p - c[k];
-            const int s = e.x() * r.y() - e.y() * r.x() > 0 ? 1 : -1;
-            if (sign == 0) sign = s;
-            inside = s == sign;
-          }
-          if (inside) hybrid[static_cast<std::size_t>(y) * w + x] = gray8[static_cast<std::size_t>(y) * w + x];
-        }
+      for (int k = 0; k < 4; ++k) c[k] = Vec2(q->p[k][0], q->p[k][1]);
       std::free(q->H);  // null here; a 3.3 matd_t is one calloc block (notes 1.1)
       std::free(q->Hinv);
+      TagDetection d;
+      if (!DecodeQuad(gray8, w, h, c, &d)) continue;
+      if (std::any_of(dets.begin(), dets.end(), [&](const TagDetection& e) { return e.id == d.id; })) continue;
+      // These corners can be a few px inside the true ones (erosion, the cut joints, the encoded
+      // threshold): one fit allowed to move further brings them within the final fit's reach.
+      if (options_.refine_corners) {
+        std::array<Vec2, 4> r = d.corners;
+        const double reach = 0.7 * (r[0] - r[2]).norm() / impl_->modules + 3.0;  // ~ a module + 3 px
+        if (!RefineTagCorners(gray, w, h, impl_->modules, &r, reach)) continue;  // no usable edges: leave it out
+        d.corners = r;
+      }
+      dets.push_back(d);
     }
     zarray_destroy(quads);
-    for (auto& d : Detect(hybrid.data(), w, h, w))
-      if (std::none_of(dets.begin(), dets.end(), [&](const TagDetection& e) { return e.id == d.id; })) dets.push_back(d);
     std::sort(dets.begin(), dets.end(), [](const TagDetection& a, const TagDetection& b) { return a.id < b.id; });
   }
   if (options_.refine_corners)

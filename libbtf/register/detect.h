@@ -74,6 +74,8 @@ class TagDetector {
 
  private:
   std::vector<TagDetection> DetectAruco(const unsigned char* gray, int width, int height, int stride) const;
+  // Decodes the quad q (AprilTag pixel convention) on `gray` with the family's bit layout.
+  bool DecodeQuad(const std::vector<unsigned char>& gray, int w, int h, std::array<Vec2, 4> q, TagDetection* out) const;
   struct Impl;
   std::unique_ptr<Impl> impl_;
   TagDetectorOptions options_;
@@ -84,8 +86,10 @@ class TagDetector {
 // the quiet-zone level (half a module outside) is located on profiles normal to the edge in the
 // linear gray image (exact for a straight edge under any symmetric blur); a total-least-squares
 // line per edge; corners = intersections of adjacent lines. Two passes. `modules` = the family's
-// width_at_border. Returns false (corners unchanged) if an edge has too few valid profiles.
-bool RefineTagCorners(const std::vector<float>& gray, int width, int height, int modules, std::array<Vec2, 4>* corners);
+// width_at_border. Returns false (corners unchanged) if an edge has too few valid profiles or a
+// corner would move by more than `max_move_px`.
+bool RefineTagCorners(const std::vector<float>& gray, int width, int height, int modules, std::array<Vec2, 4>* corners,
+                      double max_move_px = 3.0);
 
 // Linear gray (Rec.709 luminance for 3+ channels) scaled so the 99.5th percentile maps to 255.
 // Stays linear on purpose: AprilTag thresholds at the mid level, and under a symmetric blur the
