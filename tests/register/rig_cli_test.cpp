@@ -117,6 +117,11 @@ TEST(RigCli, CalibrateWithTooFewViewsNamesTheFilesAndField) {
   EXPECT_EQ(test::RunCommand(cal + " 2>&1", &out), 3) << out;
   EXPECT_NE(out.find("2 usable photos of 2, at least 3 needed (min_views)"), std::string::npos) << out;
   EXPECT_FALSE(std::filesystem::exists(dir / "camera.json"));
+  // run needs a sample region: a calibration target's manifest fails fast.
+  const std::string run = test::Tool("btf-register") + " run " + (dir / "manifest.json").string() + " -o " +
+                          (dir / "d.h5").string() + " 2>&1";
+  EXPECT_EQ(test::RunCommand(run, &out), 3) << out;
+  EXPECT_NE(out.find("sample_size_mm is 0"), std::string::npos) << out;
   // A bad model is a usage error.
   EXPECT_EQ(test::RunCommand(cal + " --model pinhole 2>&1", &out), 2) << out;
   // A board file that does not parse: exit 3 naming the file.

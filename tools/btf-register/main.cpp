@@ -53,7 +53,7 @@ nlohmann::json DetectionsJson(const std::string& path, const std::vector<btf::Ta
 
 struct DetectFlags {
   std::string image, board;
-  bool no_refine = false;
+  bool no_refine = false, no_split = false;
   bool family_given = false;
   btf::TagDetectorOptions options;
   btf::ImageReadOptions input;
@@ -83,6 +83,7 @@ struct RunFlags {
 int RunDetect(const CLI::App& app, const btf::cli::CommonFlags& common, DetectFlags& f) {
   btf::TagDetectorOptions& options = f.options;
   options.refine_corners = !f.no_refine;
+  options.split_touching = !f.no_split;
   ApplyGamma(f.input, f.input_gamma);
   std::optional<btf::Board> board;
   if (!f.board.empty()) {
@@ -208,6 +209,8 @@ int main(int argc, char** argv) {
   cd->add_option("--decimate", dopt.quad_decimate, "libapriltag quad_decimate");
   cd->add_flag("--apriltag-refine", dopt.refine_edges, "Use libapriltag's refine_edges (biased in 3.3.0)");
   cd->add_flag("--no-refine", df.no_refine, "Skip our sub-pixel edge fit (raw libapriltag corners)");
+  cd->add_flag("--no-split-touching", df.no_split,
+               "2-bit border: skip the second pass for tags touching an AprilGrid's corner squares");
   add_input_flags(cd, df.input, df.input_gamma);
 
   // calibrate
