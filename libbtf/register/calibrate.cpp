@@ -187,8 +187,16 @@ CalibrateSummary CalibrateCamera(const CalibrateOptions& o, const std::vector<st
       for (const auto& p : image[i]) img_d[i].emplace_back(p.x, p.y);
     }
     try {
+      // OpenCV's own start (f = max(w, h) / pi, no distortion) does not converge on such views:
+      // start from the pinhole intrinsics of a radtan fit.
+      cv::Mat K0, d0;
+      std::vector<cv::Mat> r0, t0;
+      cv::calibrateCamera(object, image, size, K0, d0, r0, t0, 0, crit);
+      K = K0.clone();
+      dist = cv::Mat::zeros(4, 1, CV_64F);
       sum.camera.rms_px = cv::fisheye::calibrate(obj_d, img_d, size, K, dist, rvecs, tvecs,
-                                                 cv::fisheye::CALIB_RECOMPUTE_EXTRINSIC | cv::fisheye::CALIB_FIX_SKEW,
+                                                 cv::fisheye::CALIB_RECOMPUTE_EXTRINSIC | cv::fisheye::CALIB_FIX_SKEW |
+                                                     cv::fisheye::CALIB_USE_INTRINSIC_GUESS,
                                                  crit);
     } catch (const cv::Exception& e) {
       ThrowBadInput("calibrate: the fisheye fit failed ({}): too few or too similar views", e.err);

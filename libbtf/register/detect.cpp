@@ -317,6 +317,8 @@ bool TagDetector::DecodeQuad(const std::vector<unsigned char>& gray, int w, int 
       if (hd < best_h) best_h = hd, best_id = static_cast<int>(id), best_rot = rot, margin = m;
     }
   }
+  // The margin here is the smallest |sample - threshold| over the data bits in 8-bit grey levels
+  // (libapriltag's decision margin is a different statistic): a quarter of min_decision_margin.
   if (best_id < 0 || best_h > options_.max_hamming || margin < options_.min_decision_margin / 4) return false;
   // Corners of the upright tag (LB, RB, RT, LT in its frame) through the same rotation, into
   // OpenCV's pixel convention.

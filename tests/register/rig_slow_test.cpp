@@ -89,6 +89,15 @@ TEST(RigAccuracy, CalibrateRecoversTheWideAngleCamera) {
   const json cj = json::parse(in);
   for (const char* k : {"fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "rms_px", "image_size"})
     EXPECT_TRUE(cj.contains(k)) << k;
+  // The fisheye model (theta_d = theta (1 + k1 theta^2 + .. + k4 theta^8)) fits this radtan lens
+  // as well (no fisheye truth in btf-synth): same focal bound, RMS <= 0.1 px.
+  ASSERT_EQ(test::RunCommand(cal + " --model fisheye", &out), 0) << out;
+  const CameraFile f = ReadCameraFile(dir / "camera.json");
+  std::printf("fisheye: fx %.4f fy %.4f k1..k4 %.6f %.6f %.6f %.6f RMS %.4f px\n", f.camera.fx, f.camera.fy,
+              f.fisheye_k[0], f.fisheye_k[1], f.fisheye_k[2], f.fisheye_k[3], f.rms_px);
+  EXPECT_EQ(f.model, "fisheye");
+  EXPECT_LT(std::abs(f.camera.fx / 500 - 1), 0.002);
+  EXPECT_LE(f.rms_px, 0.1);
 }
 
 }  // namespace
