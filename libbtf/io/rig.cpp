@@ -9,6 +9,7 @@
 #include "libbtf/core/error.h"
 #include "libbtf/io/json_util.h"
 
+#include <opencv2/aruco/charuco.hpp>
 #include <opencv2/core.hpp>
 
 namespace btf {
@@ -190,6 +191,47 @@ Board MakeAprilGridBoard(const AprilGrid& grid, const std::string& family, int b
   return b;
 }
 
+Board MakeCharucoBoard(const CharucoDefinition& c, const std::string& source) {
+  if (c.squares_x < 2 || c.squares_y < 2 || c.squares_x * static_cast<long>(c.squares_y) > 100000)
+    ThrowBadInput("'{}': fields 'squaresX' and 'squaresY' must be >= 2 (and at most 100000 squares)", source);
+  if (!(c.square_mm > 0)) ThrowBadInput("'{}': field 'squareSize' must be > 0 (metres)", source);
+  if (!(c.marker_mm > 0 && c.marker_mm < c.square_mm))
+    ThrowBadInput("'{}': field 'markerSize' must be > 0 and below squareSize", source);
+  const std::string names[] = {"DICT_4X4_50", "DICT_4X4_100", "DICT_4X4_250", "DICT_4X4_1000", "DICT_5X5_50",
+                               "DICT_5X5_100", "DICT_5X5_250", "DICT_5X5_1000", "DICT_6X6_50", "DICT_6X6_100",
+                               "DICT_6X6_250", "DICT_6X6_1000", "DICT_7X7_50", "DICT_7X7_100", "DICT_7X7_250",
+                               "DICT_7X7_1000", "DICT_ARUCO_ORIGINAL"};
+  int dict = -1;
+  for (int i = 0; i < static_cast<int>(std::size(names)); ++i)
+    if (c.dictionary == names[i]) dict = i;  // OpenCV's PREDEFINED_DICTIONARY_NAME order
+  if (dict < 0)
+    ThrowBadInput("'{}': field 'dictionary' is '{}': use one of DICT_4X4_50 .. DICT_7X7_1000, DICT_ARUCO_ORIGINAL",
+                  source, c.dictionary);
+  const cv::Ptr<cv::aruco::CharucoBoard> cb = cv::aruco::CharucoBoard::create(
+      c.squares_x, c.squares_y, static_cast<float>(c.square_mm), static_cast<float>(c.marker_mm),
+      cv::aruco::getPredefinedDictionary(static_cast<cv::aruco::PREDEFINED_DICTIONARY_NAME>(dict)));
+  if (static_cast<int>(cb->ids.size()) > cb->dictionary->bytesList.rows)
+    ThrowBadInput("'{}': the board needs {} markers but {} has {}", source, cb->ids.size(), c.dictionary,
+                  cb->dictionary->bytesList.rows);
+  Board b;
+  b.family = "aruco:" + c.dictionary;
+  b.sample_size_mm = 0;
+  b.charuco = c;
+  // OpenCV's board frame: x right, y down the printed board, corners TL, TR, BR, BL of each marker.
+  // Ours: y up, origin at the board's centre, corners LB, RB, RT, LT.
+  const double cx = 0.5 * c.squares_x * c.square_mm, cy = 0.5 * c.squares_y * c.square_mm;
+  for (std::size_t i = 0; i < cb->ids.size(); ++i) {
+    Marker m;
+    m.id = cb->ids[i];
+    const auto& o = cb->objPoints[i];
+    const int from[4] = {3, 2, 1, 0};
+    for (int k = 0; k < 4; ++k) m.corners_mm[k] = Vec2(o[static_cast<std::size_t>(from[k])].x - cx, cy - o[static_cast<std::size_t>(from[k])].y);
+    b.markers.push_back(m);
+  }
+  b.Check(source);
+  return b;
+}
+
 namespace {
 
 // Kalibr's target YAML through OpenCV's FileStorage (which wants a %YAML:1.0 directive first).
@@ -225,9 +267,20 @@ Board ReadKalibrTarget(const std::filesystem::path& path) {
   const cv::FileNode type = field("target_type");
   if (!type.isString()) ThrowBadInput("'{}': field 'target_type' must be a string", path.string());
   const std::string t = static_cast<std::string>(type);
+  if (t == "charuco") {
+    const cv::FileNode dn = field("dictionary");
+    if (!dn.isString()) ThrowBadInput("'{}': field 'dictionary' must be a string (e.g. DICT_5X5_100)", path.string());
+    CharucoDefinition c;
+    c.squares_x = integer("squaresX");
+    c.squares_y = integer("squaresY");
+    c.square_mm = 1000 * number("squareSize");
+    c.marker_mm = 1000 * number("markerSize");
+    c.dictionary = static_cast<std::string>(dn);
+    return MakeCharucoBoard(c, path.string());
+  }
   if (t != "aprilgrid")
-    ThrowBadInput("'{}': field 'target_type' is '{}': only Kalibr's 'aprilgrid' is supported (checkerboard and "
-                  "circlegrid have no ids)",
+    ThrowBadInput("'{}': field 'target_type' is '{}': 'aprilgrid' (Kalibr) or 'charuco' are supported "
+                  "(checkerboard and circlegrid have no ids)",
                   path.string(), t);
   AprilGrid g;
   g.rows = integer("tagRows");
@@ -264,6 +317,14 @@ Board ReadBoard(const std::filesystem::path& path) {
   b.family = root["family"].String();
   b.sample_size_mm = root["sample_size_mm"].Double();
   if (root.Has("border_bits")) b.border_bits = root["border_bits"].Int();
+  if (root.Has("charuco")) {
+    const Node c = root["charuco"];
+    b.charuco.squares_x = c["squares_x"].Int();
+    b.charuco.squares_y = c["squares_y"].Int();
+    b.charuco.square_mm = c["square_mm"].Double();
+    b.charuco.marker_mm = c["marker_mm"].Double();
+    b.charuco.dictionary = c["dictionary"].String();
+  }
   if (root.Has("aprilgrid")) {
     const Node g = root["aprilgrid"];
     b.grid.rows = g["rows"].Int();
@@ -297,6 +358,12 @@ void WriteBoard(const std::filesystem::path& path, const Board& board) {
   j["corner_order"] = "left-bottom, right-bottom, right-top, left-top of the upright tag (AprilTag order)";
   j["sample_size_mm"] = board.sample_size_mm;
   if (board.border_bits != 1) j["border_bits"] = board.border_bits;  // written only when not the default
+  if (board.charuco.valid())
+    j["charuco"] = json{{"squares_x", board.charuco.squares_x},
+                        {"squares_y", board.charuco.squares_y},
+                        {"square_mm", board.charuco.square_mm},
+                        {"marker_mm", board.charuco.marker_mm},
+                        {"dictionary", board.charuco.dictionary}};
   if (board.grid.valid())
     j["aprilgrid"] = json{{"rows", board.grid.rows},
                           {"cols", board.grid.cols},

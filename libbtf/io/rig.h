@@ -40,17 +40,31 @@ struct AprilGrid {
   bool valid() const { return rows > 0 && cols > 0; }
 };
 
+// A ChArUco board (OpenCV 4.6 aruco): squares_x x squares_y chessboard squares of side square_mm,
+// an ArUco marker of side marker_mm centred in every white square, ids 0.. in OpenCV's order.
+// Used here through its markers (quads at known plate positions); origin at the board's centre,
+// y up (OpenCV's board frame has y down).
+struct CharucoDefinition {
+  int squares_x = 0, squares_y = 0;
+  double square_mm = 0, marker_mm = 0;
+  std::string dictionary;  // e.g. "DICT_5X5_100"
+  bool valid() const { return squares_x > 0 && squares_y > 0; }
+};
+
 struct Board {
   std::string family = "tag36h11";
   int border_bits = 1;         // black border width in modules (Kalibr AprilGrid: 2)
   double sample_size_mm = 40;  // side of the square sample region centered at the origin (0: a calibration target)
   std::vector<Marker> markers;
   AprilGrid grid;              // set for AprilGrid boards (rendering draws its corner squares)
+  CharucoDefinition charuco;   // set for ChArUco boards (informative; the markers carry the geometry)
   void Check(const std::string& source) const;  // ids unique, corners finite, non-degenerate
 };
 
 // The markers of an AprilGrid, corners in plate mm (frame above), height 0.
 Board MakeAprilGridBoard(const AprilGrid& grid, const std::string& family = "tag36h11", int border_bits = 2);
+// The ArUco markers of a ChArUco board (family "aruco:DICT_..."); bad input names `source`.
+Board MakeCharucoBoard(const CharucoDefinition& charuco, const std::string& source);
 
 struct CameraModel {
   int width = 0, height = 0;
@@ -110,7 +124,7 @@ struct PhotoTruth {
 
 // Readers validate every field and throw btf::Error (bad input) naming file, entry and field.
 // ReadBoard reads ours (JSON, format libbtf-board) or a Kalibr target YAML (.yaml/.yml,
-// target_type 'aprilgrid'; tagSize in metres); see docs/btf-register.md, "Boards".
+// target_type 'aprilgrid' or 'charuco'; sizes in metres); see docs/btf-register.md, "Fiducials and boards".
 Board ReadBoard(const std::filesystem::path& path);
 void WriteBoard(const std::filesystem::path& path, const Board& board);
 Manifest ReadManifest(const std::filesystem::path& path);

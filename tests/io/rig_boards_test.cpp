@@ -59,6 +59,23 @@ TEST(RigBoards, KalibrAprilGridYamlGivesTagsRowMajorFromTheBottomLeft) {
   EXPECT_EQ(r.markers.size(), 36u);
 }
 
+TEST(RigBoards, CharucoYamlGivesItsMarkersCentredWithYUp) {
+  const auto dir = test::TempDir();
+  Write(dir / "c.yaml", "target_type: charuco\nsquaresX: 5\nsquaresY: 7\nsquareSize: 0.04\nmarkerSize: 0.03\n"
+                        "dictionary: DICT_5X5_100\n");
+  const Board b = ReadBoard(dir / "c.yaml");
+  EXPECT_EQ(b.family, "aruco:DICT_5X5_100");
+  ASSERT_EQ(b.markers.size(), 17u);  // the white squares of a 5 x 7 board
+  EXPECT_EQ(b.charuco.squares_x, 5);
+  for (const auto& m : b.markers) {
+    EXPECT_NEAR(m.corners_mm[1].x() - m.corners_mm[0].x(), 30, 1e-3);  // LB -> RB: +x
+    EXPECT_NEAR(m.corners_mm[3].y() - m.corners_mm[0].y(), 30, 1e-3);  // LB -> LT: +y
+    for (const auto& c : m.corners_mm) EXPECT_TRUE(std::abs(c.x()) <= 100 && std::abs(c.y()) <= 140);
+  }
+  WriteBoard(dir / "c.json", b);
+  EXPECT_EQ(ReadBoard(dir / "c.json").charuco.dictionary, "DICT_5X5_100");
+}
+
 TEST(RigBoards, BadBoardFilesNameFileAndField) {
   const auto dir = test::TempDir();
   Write(dir / "syntax.yaml", "target_type: [aprilgrid\n");
@@ -71,6 +88,15 @@ TEST(RigBoards, BadBoardFilesNameFileAndField) {
   EXPECT_NE(BoardError(dir / "num.yaml").find("'tagRows' must be an integer"), std::string::npos);
   Write(dir / "neg.yaml", "target_type: aprilgrid\ntagCols: 6\ntagRows: 6\ntagSize: -0.1\ntagSpacing: 0.3\n");
   EXPECT_NE(BoardError(dir / "neg.yaml").find("'tagSize' must be > 0"), std::string::npos);
+  Write(dir / "dict.yaml", "target_type: charuco\nsquaresX: 5\nsquaresY: 7\nsquareSize: 0.04\nmarkerSize: 0.03\n"
+                           "dictionary: DICT_9X9_1\n");
+  EXPECT_NE(BoardError(dir / "dict.yaml").find("field 'dictionary' is 'DICT_9X9_1'"), std::string::npos);
+  Write(dir / "msize.yaml", "target_type: charuco\nsquaresX: 5\nsquaresY: 7\nsquareSize: 0.04\nmarkerSize: 0.05\n"
+                            "dictionary: DICT_5X5_100\n");
+  EXPECT_NE(BoardError(dir / "msize.yaml").find("'markerSize' must be > 0 and below squareSize"), std::string::npos);
+  Write(dir / "many.yaml", "target_type: charuco\nsquaresX: 20\nsquaresY: 20\nsquareSize: 0.04\nmarkerSize: 0.03\n"
+                           "dictionary: DICT_4X4_50\n");
+  EXPECT_NE(BoardError(dir / "many.yaml").find("needs 200 markers but DICT_4X4_50 has 50"), std::string::npos);
   for (const char* f : {"syntax.yaml", "missing.yaml"}) EXPECT_NE(BoardError(dir / f).find(f), std::string::npos);
   // Our JSON board: a bad border.
   Write(dir / "b.json",

@@ -7,6 +7,8 @@
 
 #include <nlohmann/json.hpp>
 #include <opencv2/aruco.hpp>
+#include <opencv2/aruco/charuco.hpp>
+#include <opencv2/calib3d.hpp>
 
 #include "libbtf/core/error.h"
 #include "libbtf/io/rig.h"
@@ -103,6 +105,50 @@ TEST(RigDetect, ArucoMarkersInOurCornerOrderAndPixelConvention) {
     for (int k = 0; k < 4; ++k)  // our edge fit on pixel-aligned edges: exact to 0.01 px
       EXPECT_LT((d[0].corners[k] - want[k]).norm(), 0.01) << "border " << border << " corner " << k;
   }
+}
+
+TEST(RigDetect, CharucoBoardMarkersMatchTheBoardFile) {
+  // OpenCV draws a 5 x 7 ChArUco board (DICT_5X5_100, 40 px squares, 30 px markers, 20 px margin);
+  // our detector finds its 17 markers and the homography from the board's corners (mm, from the
+  // YAML definition read by ReadBoard) to the detected corners fits all 68 to 0.02 px, which holds
+  // only with the right layout, ids, corner order and y direction.
+  const auto dir = test::TempDir();
+  std::ofstream(dir / "charuco.yaml") << "target_type: charuco\nsquaresX: 5\nsquaresY: 7\nsquareSize: 0.04\n"
+                                         "markerSize: 0.03\ndictionary: DICT_5X5_100\n";
+  const Board board = ReadBoard(dir / "charuco.yaml");
+  ASSERT_EQ(board.markers.size(), 17u);
+  EXPECT_EQ(board.family, "aruco:DICT_5X5_100");
+  const auto cb = cv::aruco::CharucoBoard::create(5, 7, 0.04f, 0.03f,
+                                                  cv::aruco::getPredefinedDictionary(cv::aruco::DICT_5X5_100));
+  cv::Mat drawn;
+  cb->draw(cv::Size(240, 320), drawn, 20, 1);
+  Image im(drawn.cols, drawn.rows, 1);
+  for (int y = 0; y < drawn.rows; ++y)
+    for (int x = 0; x < drawn.cols; ++x) im.at(x, y, 0) = drawn.at<unsigned char>(y, x) ? 0.8f : 0.05f;
+  TagDetectorOptions o;
+  o.family = board.family;
+  const auto dets = TagDetector(o).Detect(im);
+  EXPECT_EQ(dets.size(), 17u);
+  std::vector<cv::Point2f> mm, px;
+  for (const auto& d : dets)
+    for (const auto& m : board.markers)
+      if (m.id == d.id)
+        for (int k = 0; k < 4; ++k) {
+          mm.emplace_back(static_cast<float>(m.corners_mm[k].x()), static_cast<float>(m.corners_mm[k].y()));
+          px.emplace_back(static_cast<float>(d.corners[k].x()), static_cast<float>(d.corners[k].y()));
+        }
+  ASSERT_EQ(mm.size(), 68u);
+  const cv::Mat H = cv::findHomography(mm, px, 0);
+  ASSERT_FALSE(H.empty());
+  std::vector<cv::Point2f> proj;
+  cv::perspectiveTransform(mm, proj, H);
+  double ss = 0;
+  for (std::size_t i = 0; i < proj.size(); ++i) ss += std::pow(proj[i].x - px[i].x, 2) + std::pow(proj[i].y - px[i].y, 2);
+  const double rms = std::sqrt(ss / static_cast<double>(proj.size()));
+  std::printf("ChArUco 5x7: %zu markers, board-to-image homography RMS %.4f px\n", dets.size(), rms);
+  EXPECT_LT(rms, 0.02);
+  // Board y up: the image y of a marker with larger board y is smaller.
+  EXPECT_LT(H.at<double>(1, 1) / H.at<double>(2, 2), 0);
 }
 
 TEST(RigCli, CalibrateWithTooFewViewsNamesTheFilesAndField) {
