@@ -41,7 +41,7 @@ double CornerRms(const json& det, const PhotoTruth& truth, int* found) {
 
 TEST(RigCli, AprilGridWithTwoBitBorderInSrgbJpegIsFoundWithBoardCoordinates) {
   // 30 deg view of a 6 x 6 AprilGrid, 640 x 480, 8-bit sRGB JPEG quality 90, blur 0.7 px, noise
-  // 0.5 % of full scale, k1 = -0.05. Bound 0.08 px: modules are 4.5 px at 0 deg here and the
+  // 0.5 % of full scale, k1 = -0.05. Bound 0.08 px: modules are 5.4 px at 0 deg here and the
   // photo's 3 x 3 samples per pixel quantise edges to 1/3 px (docs/btf-register.md, "Accuracy");
   // the 0.05 px figure at 1024 x 768 with 8 x 8 samples is in rig_slow_test.cpp.
   const auto dir = test::TempDir();
