@@ -78,7 +78,16 @@ void CheckExrHeader(const std::string& name, const std::string& bytes) {
 }
 }  // namespace
 
-Image ReadImage(const std::filesystem::path& path) {
+void ImageReadOptions::Check() const {
+  BTF_CHECK_OPTION(colorspace == "auto" || colorspace == "linear" || colorspace == "srgb" || colorspace == "gamma",
+                   "colorspace", "auto, linear, srgb or gamma");
+  BTF_CHECK_OPTION(std::isfinite(gamma) && gamma >= 0.2 && gamma <= 5, "input-gamma", "0.2..5");
+}
+
+Image ReadImage(const std::filesystem::path& path) { return ReadImage(path, ImageReadOptions()); }
+
+Image ReadImage(const std::filesystem::path& path, const ImageReadOptions& options) {
+  options.Check();
   const std::string name = path.string();
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) ThrowIo("cannot read image '{}': no such file", name);
@@ -117,7 +126,14 @@ Image ReadImage(const std::filesystem::path& path) {
                        spec.format.basetype != OIIO::TypeDesc::DOUBLE;
   const std::string cs = Lower(spec.get_string_attribute("oiio:ColorSpace"));
   const std::string ext = Lower(path.extension().string());
-  const bool srgb = integer && (cs == "srgb" || (cs.empty() && (ext == ".png" || ext == ".jpg" || ext == ".jpeg")));
+  bool srgb = integer && (cs == "srgb" || (cs.empty() && (ext == ".png" || ext == ".jpg" || ext == ".jpeg")));
+  if (integer && options.colorspace != "auto") srgb = options.colorspace == "srgb";
+  if (integer && options.colorspace == "gamma") {
+    const float g = static_cast<float>(options.gamma);
+    const int alpha = spec.alpha_channel;
+    for (std::size_t i = 0; i < img.pixels.size(); ++i)
+      if (static_cast<int>(i % std::size_t(spec.nchannels)) != alpha) img.pixels[i] = std::pow(std::max(img.pixels[i], 0.0f), g);
+  }
   if (srgb) {
     const int alpha = spec.alpha_channel;
     for (std::size_t i = 0; i < img.pixels.size(); ++i)
@@ -145,6 +161,8 @@ void WriteImage(const std::filesystem::path& path, const Image& image, const Ima
   spec.alpha_channel = -1;
   spec.attribute("oiio:UnassociatedAlpha", 1);
   if (ext == ".exr") spec.attribute("compression", "zip");
+  if ((ext == ".jpg" || ext == ".jpeg") && options.jpeg_quality > 0)
+    spec.attribute("Compression", fmt::format("jpeg:{}", std::clamp(options.jpeg_quality, 1, 100)));
   auto writer = OIIO::ImageOutput::create(path.string());
   if (!writer) ThrowUsage("cannot write image '{}': unsupported file type '{}'", path.string(), ext);
   // Encoded in memory, then written by WriteFileAtomic, whose every write is checked: OpenImageIO

@@ -24,12 +24,23 @@ struct ImageWriteOptions {
   PixelFormat format = PixelFormat::kFloat;
   // Integer formats: encode with the sRGB transfer curve (true) or store linear values (false).
   bool srgb = false;
+  int jpeg_quality = 0;  // JPEG quality 1..100; 0 = OpenImageIO's default (95)
+};
+
+// How integer pixel values are decoded to linear (float files are always read as stored).
+struct ImageReadOptions {
+  // "auto": the file's colour-space metadata (oiio:ColorSpace; sRGB if untagged PNG/JPEG), as
+  // ReadImage(path); "linear": values as stored; "srgb": the sRGB curve; "gamma": v^gamma.
+  std::string colorspace = "auto";
+  double gamma = 2.2;  // with colorspace "gamma"
+  void Check() const;  // names the bad field
 };
 
 // Reads any format OpenImageIO reads. Integer files tagged sRGB (PNG and JPEG by default, or an
 // "oiio:ColorSpace" of sRGB) are decoded to linear; everything else is read as stored and
 // normalized to [0, 1] for integer types. Throws btf::Error naming the file.
 Image ReadImage(const std::filesystem::path& path);
+Image ReadImage(const std::filesystem::path& path, const ImageReadOptions& options);
 // Writes atomically. Values are clamped to the integer range for integer formats.
 void WriteImage(const std::filesystem::path& path, const Image& image, const ImageWriteOptions& options = {});
 

@@ -9,6 +9,9 @@
 #include "libbtf/core/error.h"
 #include "libbtf/io/json_util.h"
 
+#include <opencv2/aruco/charuco.hpp>
+#include <opencv2/core.hpp>
+
 namespace btf {
 namespace {
 
@@ -144,8 +147,10 @@ void WriteJsonAtomic(const std::filesystem::path& path, const json& j) { WriteTe
 
 void Board::Check(const std::string& source) const {
   if (family.empty()) ThrowBadInput("'{}': board family is empty", source);
-  if (!(std::isfinite(sample_size_mm) && sample_size_mm > 0))
-    ThrowBadInput("'{}': sample_size_mm must be a positive number, found {}", source, sample_size_mm);
+  if (!(std::isfinite(sample_size_mm) && sample_size_mm >= 0))
+    ThrowBadInput("'{}': sample_size_mm must be a number >= 0 (0: a calibration target), found {}", source,
+                  sample_size_mm);
+  if (border_bits < 1 || border_bits > 2) ThrowBadInput("'{}': border_bits must be 1 or 2, found {}", source, border_bits);
   if (markers.empty()) ThrowBadInput("'{}': the board has no markers", source);
   std::set<int> ids;
   for (std::size_t i = 0; i < markers.size(); ++i) {
@@ -166,13 +171,168 @@ void Board::Check(const std::string& source) const {
   }
 }
 
+Board MakeAprilGridBoard(const AprilGrid& grid, const std::string& family, int border_bits) {
+  Board b;
+  b.family = family;
+  b.border_bits = border_bits;
+  b.sample_size_mm = 0;
+  b.grid = grid;
+  const double s = grid.tag_size_mm, pitch = s * (1 + grid.spacing);
+  const double w = grid.cols * s + (grid.cols - 1) * grid.spacing * s, h = grid.rows * s + (grid.rows - 1) * grid.spacing * s;
+  for (int r = 0; r < grid.rows; ++r)
+    for (int c = 0; c < grid.cols; ++c) {
+      Marker m;
+      m.id = grid.first_id + r * grid.cols + c;
+      const Vec2 o(-w / 2 + c * pitch, -h / 2 + r * pitch);  // bottom-left corner of the tag
+      m.corners_mm = {o, o + Vec2(s, 0), o + Vec2(s, s), o + Vec2(0, s)};
+      b.markers.push_back(m);
+    }
+  return b;
+}
+
+Board MakeCharucoBoard(const CharucoDefinition& c, const std::string& source) {
+  if (c.squares_x < 2 || c.squares_y < 2 || c.squares_x * static_cast<long>(c.squares_y) > 100000)
+    ThrowBadInput("'{}': fields 'squaresX' and 'squaresY' must be >= 2 (and at most 100000 squares)", source);
+  if (!(c.square_mm > 0)) ThrowBadInput("'{}': field 'squareSize' must be > 0 (metres)", source);
+  if (!(c.marker_mm > 0 && c.marker_mm < c.square_mm))
+    ThrowBadInput("'{}': field 'markerSize' must be > 0 and below squareSize", source);
+  const std::string names[] = {"DICT_4X4_50", "DICT_4X4_100", "DICT_4X4_250", "DICT_4X4_1000", "DICT_5X5_50",
+                               "DICT_5X5_100", "DICT_5X5_250", "DICT_5X5_1000", "DICT_6X6_50", "DICT_6X6_100",
+                               "DICT_6X6_250", "DICT_6X6_1000", "DICT_7X7_50", "DICT_7X7_100", "DICT_7X7_250",
+                               "DICT_7X7_1000", "DICT_ARUCO_ORIGINAL"};
+  int dict = -1;
+  for (int i = 0; i < static_cast<int>(std::size(names)); ++i)
+    if (c.dictionary == names[i]) dict = i;  // OpenCV's PREDEFINED_DICTIONARY_NAME order
+  if (dict < 0)
+    ThrowBadInput("'{}': field 'dictionary' is '{}': use one of DICT_4X4_50 .. DICT_7X7_1000, DICT_ARUCO_ORIGINAL",
+                  source, c.dictionary);
+  const cv::Ptr<cv::aruco::CharucoBoard> cb = cv::aruco::CharucoBoard::create(
+      c.squares_x, c.squares_y, static_cast<float>(c.square_mm), static_cast<float>(c.marker_mm),
+      cv::aruco::getPredefinedDictionary(static_cast<cv::aruco::PREDEFINED_DICTIONARY_NAME>(dict)));
+  if (static_cast<int>(cb->ids.size()) > cb->dictionary->bytesList.rows)
+    ThrowBadInput("'{}': the board needs {} markers but {} has {}", source, cb->ids.size(), c.dictionary,
+                  cb->dictionary->bytesList.rows);
+  Board b;
+  b.family = "aruco:" + c.dictionary;
+  b.sample_size_mm = 0;
+  b.charuco = c;
+  // OpenCV's board frame: x right, y down the printed board, corners TL, TR, BR, BL of each marker.
+  // Ours: y up, origin at the board's centre, corners LB, RB, RT, LT.
+  const double cx = 0.5 * c.squares_x * c.square_mm, cy = 0.5 * c.squares_y * c.square_mm;
+  for (std::size_t i = 0; i < cb->ids.size(); ++i) {
+    Marker m;
+    m.id = cb->ids[i];
+    const auto& o = cb->objPoints[i];
+    const int from[4] = {3, 2, 1, 0};
+    for (int k = 0; k < 4; ++k) m.corners_mm[k] = Vec2(o[static_cast<std::size_t>(from[k])].x - cx, cy - o[static_cast<std::size_t>(from[k])].y);
+    b.markers.push_back(m);
+  }
+  b.Check(source);
+  return b;
+}
+
+namespace {
+
+// Kalibr's target YAML through OpenCV's FileStorage (which wants a %YAML:1.0 directive first).
+Board ReadKalibrTarget(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  if (!in) ThrowIo("cannot open '{}': check that the file exists and is readable", path.string());
+  std::stringstream text;
+  text << in.rdbuf();
+  cv::FileStorage fs;
+  try {
+    fs.open("%YAML:1.0\n" + text.str(), cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
+  } catch (const cv::Exception& e) {
+    ThrowBadInput("'{}': not valid YAML ({}; line numbers count one extra line)", path.string(), e.err);
+  }
+  if (!fs.isOpened()) ThrowBadInput("'{}': not valid YAML", path.string());
+  const auto field = [&](const char* key) {
+    const cv::FileNode n = fs[key];
+    if (n.empty()) ThrowBadInput("'{}': missing required field '{}'", path.string(), key);
+    return n;
+  };
+  const auto number = [&](const char* key) {
+    const cv::FileNode n = field(key);
+    if (!n.isReal() && !n.isInt()) ThrowBadInput("'{}': field '{}' must be a number", path.string(), key);
+    const double v = static_cast<double>(n);
+    if (!std::isfinite(v)) ThrowBadInput("'{}': field '{}' must be finite", path.string(), key);
+    return v;
+  };
+  const auto integer = [&](const char* key) {
+    const cv::FileNode n = field(key);
+    if (!n.isInt()) ThrowBadInput("'{}': field '{}' must be an integer", path.string(), key);
+    return static_cast<int>(n);
+  };
+  const cv::FileNode type = field("target_type");
+  if (!type.isString()) ThrowBadInput("'{}': field 'target_type' must be a string", path.string());
+  const std::string t = static_cast<std::string>(type);
+  if (t == "charuco") {
+    const cv::FileNode dn = field("dictionary");
+    if (!dn.isString()) ThrowBadInput("'{}': field 'dictionary' must be a string (e.g. DICT_5X5_100)", path.string());
+    CharucoDefinition c;
+    c.squares_x = integer("squaresX");
+    c.squares_y = integer("squaresY");
+    c.square_mm = 1000 * number("squareSize");
+    c.marker_mm = 1000 * number("markerSize");
+    c.dictionary = static_cast<std::string>(dn);
+    return MakeCharucoBoard(c, path.string());
+  }
+  if (t != "aprilgrid")
+    ThrowBadInput("'{}': field 'target_type' is '{}': 'aprilgrid' (Kalibr) or 'charuco' are supported "
+                  "(checkerboard and circlegrid have no ids)",
+                  path.string(), t);
+  AprilGrid g;
+  g.rows = integer("tagRows");
+  g.cols = integer("tagCols");
+  g.tag_size_mm = 1000 * number("tagSize");
+  g.spacing = number("tagSpacing");
+  if (g.rows < 1 || g.cols < 1 || g.rows * static_cast<long>(g.cols) > 100000)
+    ThrowBadInput("'{}': fields 'tagRows' and 'tagCols' must be 1..100000 tags in all, found {} x {}", path.string(),
+                  g.rows, g.cols);
+  if (!(g.tag_size_mm > 0)) ThrowBadInput("'{}': field 'tagSize' must be > 0 (metres)", path.string());
+  if (!(g.spacing > 0 && g.spacing < 10)) ThrowBadInput("'{}': field 'tagSpacing' must be in (0, 10) (gap / tag size)", path.string());
+  // Optional extensions (not Kalibr's): the family and border (Kalibr: tag36h11, 2 bits).
+  std::string family = "tag36h11";
+  int border = 2;
+  if (!fs["tagFamily"].empty()) family = static_cast<std::string>(fs["tagFamily"]);
+  if (!fs["borderBits"].empty()) border = integer("borderBits");
+  if (!fs["firstId"].empty()) g.first_id = integer("firstId");
+  if (border < 1 || border > 2) ThrowBadInput("'{}': field 'borderBits' must be 1 or 2", path.string());
+  Board b = MakeAprilGridBoard(g, family, border);
+  b.Check(path.string());
+  return b;
+}
+
+}  // namespace
+
 Board ReadBoard(const std::filesystem::path& path) {
+  std::string ext = path.extension().string();
+  for (auto& ch : ext) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+  if (ext == ".yaml" || ext == ".yml") return ReadKalibrTarget(path);
   const json j = LoadJson(path);
   const Node root(&path, &j, "");
   CheckHeader(root, kBoardFormat);
   Board b;
   b.family = root["family"].String();
   b.sample_size_mm = root["sample_size_mm"].Double();
+  if (root.Has("border_bits")) b.border_bits = root["border_bits"].Int();
+  if (root.Has("charuco")) {
+    const Node c = root["charuco"];
+    b.charuco.squares_x = c["squares_x"].Int();
+    b.charuco.squares_y = c["squares_y"].Int();
+    b.charuco.square_mm = c["square_mm"].Double();
+    b.charuco.marker_mm = c["marker_mm"].Double();
+    b.charuco.dictionary = c["dictionary"].String();
+  }
+  if (root.Has("aprilgrid")) {
+    const Node g = root["aprilgrid"];
+    b.grid.rows = g["rows"].Int();
+    b.grid.cols = g["cols"].Int();
+    b.grid.tag_size_mm = g["tag_size_mm"].Double();
+    b.grid.spacing = g["spacing"].Double();
+    b.grid.first_id = g.Has("first_id") ? g["first_id"].Int() : 0;
+    if (!b.grid.valid() || !(b.grid.tag_size_mm > 0) || !(b.grid.spacing > 0)) g.Fail("rows, cols, tag_size_mm and spacing must be > 0");
+  }
   const Node ms = root["markers"];
   const std::size_t n = ms.ArraySize();
   for (std::size_t i = 0; i < n; ++i) {
@@ -196,6 +356,19 @@ void WriteBoard(const std::filesystem::path& path, const Board& board) {
   j["units"] = "mm";
   j["corner_order"] = "left-bottom, right-bottom, right-top, left-top of the upright tag (AprilTag order)";
   j["sample_size_mm"] = board.sample_size_mm;
+  if (board.border_bits != 1) j["border_bits"] = board.border_bits;  // written only when not the default
+  if (board.charuco.valid())
+    j["charuco"] = json{{"squares_x", board.charuco.squares_x},
+                        {"squares_y", board.charuco.squares_y},
+                        {"square_mm", board.charuco.square_mm},
+                        {"marker_mm", board.charuco.marker_mm},
+                        {"dictionary", board.charuco.dictionary}};
+  if (board.grid.valid())
+    j["aprilgrid"] = json{{"rows", board.grid.rows},
+                          {"cols", board.grid.cols},
+                          {"tag_size_mm", board.grid.tag_size_mm},
+                          {"spacing", board.grid.spacing},
+                          {"first_id", board.grid.first_id}};
   json ms = json::array();
   for (const auto& m : board.markers) {
     json jm;
@@ -222,13 +395,66 @@ CameraModel CameraFromJson(const Node& n) {
   c.cy = n["cy"].Double();
   c.k1 = n.Has("k1") ? n["k1"].Double() : 0.0;
   c.k2 = n.Has("k2") ? n["k2"].Double() : 0.0;
+  c.p1 = n.Has("p1") ? n["p1"].Double() : 0.0;
+  c.p2 = n.Has("p2") ? n["p2"].Double() : 0.0;
+  c.k3 = n.Has("k3") ? n["k3"].Double() : 0.0;
   return c;
 }
 json CameraToJson(const CameraModel& c) {
-  return json{{"width", c.width}, {"height", c.height}, {"fx", c.fx}, {"fy", c.fy},
-              {"cx", c.cx},       {"cy", c.cy},         {"k1", c.k1}, {"k2", c.k2}};
+  json j{{"width", c.width}, {"height", c.height}, {"fx", c.fx}, {"fy", c.fy},
+         {"cx", c.cx},       {"cy", c.cy},         {"k1", c.k1}, {"k2", c.k2}};
+  if (c.has_extended_distortion()) j["p1"] = c.p1, j["p2"] = c.p2, j["k3"] = c.k3;  // only when used
+  return j;
 }
 }  // namespace
+
+CameraFile ReadCameraFile(const std::filesystem::path& path) {
+  const json j = LoadJson(path);
+  const Node root(&path, &j, "");
+  CameraFile f;
+  f.model = root.Has("model") ? root["model"].String() : "radtan";
+  if (f.model != "radtan" && f.model != "fisheye") root["model"].Fail("must be 'radtan' or 'fisheye'");
+  const Node size = root["image_size"];
+  size.ArraySize(2);
+  CameraModel& c = f.camera;
+  c.width = size.At(0).Int();
+  c.height = size.At(1).Int();
+  if (c.width < 1 || c.height < 1) size.Fail("width and height must be >= 1");
+  c.fx = root["fx"].Double();
+  c.fy = root["fy"].Double();
+  if (!(c.fx > 0 && c.fy > 0)) root.Fail("fx and fy must be > 0");
+  c.cx = root["cx"].Double();
+  c.cy = root["cy"].Double();
+  if (f.model == "radtan") {
+    c.k1 = root["k1"].Double();
+    c.k2 = root["k2"].Double();
+    c.p1 = root["p1"].Double();
+    c.p2 = root["p2"].Double();
+    c.k3 = root["k3"].Double();
+  } else {
+    for (int i = 0; i < 4; ++i) f.fisheye_k[i] = root[fmt::format("k{}", i + 1)].Double();
+  }
+  f.rms_px = root.Has("rms_px") ? root["rms_px"].Double() : 0.0;
+  return f;
+}
+
+void WriteCameraFile(const std::filesystem::path& path, const CameraFile& f, const nlohmann::json& extra) {
+  const CameraModel& c = f.camera;
+  json j = Header("libbtf-camera");
+  j["model"] = f.model;
+  j["convention"] = "OpenCV: pixel centres at integer coordinates, (0,0) = centre of the top-left pixel";
+  j["image_size"] = json::array({c.width, c.height});
+  j["fx"] = c.fx, j["fy"] = c.fy, j["cx"] = c.cx, j["cy"] = c.cy;
+  if (f.model == "radtan") {
+    j["k1"] = c.k1, j["k2"] = c.k2, j["p1"] = c.p1, j["p2"] = c.p2, j["k3"] = c.k3;
+  } else {
+    for (int i = 0; i < 4; ++i) j[fmt::format("k{}", i + 1)] = f.fisheye_k[i];
+  }
+  j["rms_px"] = f.rms_px;
+  if (extra.is_object())
+    for (const auto& [k, v] : extra.items()) j[k] = v;
+  WriteJsonAtomic(path, j);
+}
 
 Manifest ReadManifest(const std::filesystem::path& path) {
   const json j = LoadJson(path);
@@ -241,6 +467,10 @@ Manifest ReadManifest(const std::filesystem::path& path) {
   m.lights = SamplingFromJson(root["lights"]);
   m.bit_depth = root["bit_depth"].Int();
   if (m.bit_depth != 0 && m.bit_depth != 8 && m.bit_depth != 16) root["bit_depth"].Fail("must be 0 (float), 8 or 16");
+  if (root.Has("transfer")) {
+    m.transfer = root["transfer"].String();
+    if (m.transfer != "linear" && m.transfer != "srgb") root["transfer"].Fail("must be 'linear' or 'srgb'");
+  }
   if (root.Has("extra")) m.extra = root["extra"].raw();
   const Node ps = root["photos"];
   const std::size_t n = ps.ArraySize();
@@ -277,6 +507,7 @@ void WriteManifest(const std::filesystem::path& path, const Manifest& m) {
   j["views"] = SamplingToJson(m.views);
   j["lights"] = SamplingToJson(m.lights);
   j["bit_depth"] = m.bit_depth;
+  if (!m.transfer.empty()) j["transfer"] = m.transfer;
   j["pixel_value"] = "exposure * radiance; radiance = BTF(1/sr) * irradiance";
   json ps = json::array();
   for (const auto& e : m.photos) {
@@ -355,6 +586,13 @@ bool ProjectToPixel(const CameraModel& camera, const Eigen::Matrix3d& R, const V
   if (!(c.z() > 1e-9)) return false;
   const double x = c.x() / c.z(), y = c.y() / c.z();
   const double r2 = x * x + y * y;
+  if (camera.has_extended_distortion()) {  // OpenCV radtan; the branch keeps k1/k2-only results bit for bit
+    const double f = 1 + camera.k1 * r2 + camera.k2 * r2 * r2 + camera.k3 * r2 * r2 * r2;
+    const double xd = x * f + 2 * camera.p1 * x * y + camera.p2 * (r2 + 2 * x * x);
+    const double yd = y * f + camera.p1 * (r2 + 2 * y * y) + 2 * camera.p2 * x * y;
+    *pixel = Vec2(camera.fx * xd + camera.cx, camera.fy * yd + camera.cy);
+    return true;
+  }
   const double f = 1 + camera.k1 * r2 + camera.k2 * r2 * r2;
   *pixel = Vec2(camera.fx * x * f + camera.cx, camera.fy * y * f + camera.cy);
   return true;

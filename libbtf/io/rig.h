@@ -28,18 +28,61 @@ struct Marker {
   double height_mm = 0;  // height of the marker plane above the material surface
 };
 
+// A Kalibr AprilGrid (target_type: aprilgrid): tagRows x tagCols tags of side tagSize, tagSpacing x
+// tagSize apart, tag 0 at the bottom left, ids row-major, black squares of the gap's size at the
+// tags' corners. Our plate frame puts the origin at the grid's centre (Kalibr's: tag 0's
+// bottom-left corner; a translation, which pose and calibration do not see).
+struct AprilGrid {
+  int rows = 0, cols = 0;     // 0 = not an AprilGrid
+  double tag_size_mm = 0;     // detection square (outer edge of the black border)
+  double spacing = 0;         // gap between tags / tag size
+  int first_id = 0;
+  bool valid() const { return rows > 0 && cols > 0; }
+};
+
+// A ChArUco board (OpenCV 4.6 aruco): squares_x x squares_y chessboard squares of side square_mm,
+// an ArUco marker of side marker_mm centred in every white square, ids 0.. in OpenCV's order.
+// Used here through its markers (quads at known plate positions); origin at the board's centre,
+// y up (OpenCV's board frame has y down).
+struct CharucoDefinition {
+  int squares_x = 0, squares_y = 0;
+  double square_mm = 0, marker_mm = 0;
+  std::string dictionary;  // e.g. "DICT_5X5_100"
+  bool valid() const { return squares_x > 0 && squares_y > 0; }
+};
+
 struct Board {
   std::string family = "tag36h11";
-  double sample_size_mm = 40;  // side of the square sample region centered at the origin
+  int border_bits = 1;         // black border width in modules (Kalibr AprilGrid: 2)
+  double sample_size_mm = 40;  // side of the square sample region centered at the origin (0: a calibration target)
   std::vector<Marker> markers;
+  AprilGrid grid;              // set for AprilGrid boards (rendering draws its corner squares)
+  CharucoDefinition charuco;   // set for ChArUco boards (informative; the markers carry the geometry)
   void Check(const std::string& source) const;  // ids unique, corners finite, non-degenerate
 };
+
+// The markers of an AprilGrid, corners in plate mm (frame above), height 0.
+Board MakeAprilGridBoard(const AprilGrid& grid, const std::string& family = "tag36h11", int border_bits = 2);
+// The ArUco markers of a ChArUco board (family "aruco:DICT_..."); bad input names `source`.
+Board MakeCharucoBoard(const CharucoDefinition& charuco, const std::string& source);
 
 struct CameraModel {
   int width = 0, height = 0;
   double fx = 0, fy = 0, cx = 0, cy = 0;  // OpenCV convention
-  double k1 = 0, k2 = 0;                  // radial distortion (OpenCV model, no tangential)
+  double k1 = 0, k2 = 0;                  // radial distortion (OpenCV model)
+  double p1 = 0, p2 = 0, k3 = 0;          // tangential and third radial term (OpenCV radtan; from calibration)
+  bool has_extended_distortion() const { return p1 != 0 || p2 != 0 || k3 != 0; }
 };
+
+// camera.json (btf-register calibrate): the intrinsics, their model and the fit's RMS.
+struct CameraFile {
+  std::string model = "radtan";  // "radtan" (k1, k2, p1, p2, k3) or "fisheye" (k1..k4, OpenCV fisheye)
+  CameraModel camera;            // radtan coefficients in k1, k2, p1, p2, k3
+  double fisheye_k[4] = {0, 0, 0, 0};
+  double rms_px = 0;
+};
+CameraFile ReadCameraFile(const std::filesystem::path& path);
+void WriteCameraFile(const std::filesystem::path& path, const CameraFile& camera, const nlohmann::json& extra = {});
 
 // The camera projection shared by photo synthesis and registration (docs/conventions.md): plate
 // point p (mm, z above the material surface) -> pixel (OpenCV convention), through the pose
@@ -65,7 +108,8 @@ struct PhotoEntry {
 struct Manifest {
   std::string board_file;  // relative to the manifest's folder
   Sampling views, lights;  // the full samplings the indices refer to
-  int bit_depth = 0;       // 0 = float EXR, 8 or 16 = integer PNG (linear, not sRGB)
+  int bit_depth = 0;       // 0 = float EXR, 8 or 16 = integer PNG/JPEG
+  std::string transfer;    // integer encoding: "" = not stated (linear PNG, or the file's tag), "linear", "srgb"
   std::vector<PhotoEntry> photos;
   nlohmann::json extra = nlohmann::json::object();  // model, preset, resolution hints
 };
@@ -79,6 +123,8 @@ struct PhotoTruth {
 };
 
 // Readers validate every field and throw btf::Error (bad input) naming file, entry and field.
+// ReadBoard reads ours (JSON, format libbtf-board) or a Kalibr target YAML (.yaml/.yml,
+// target_type 'aprilgrid' or 'charuco'; sizes in metres); see docs/btf-register.md, "Fiducials and boards".
 Board ReadBoard(const std::filesystem::path& path);
 void WriteBoard(const std::filesystem::path& path, const Board& board);
 Manifest ReadManifest(const std::filesystem::path& path);

@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
+#include <cstdlib>
 #include <functional>
+#include <tuple>
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
@@ -18,8 +20,15 @@
 #include <apriltag/tagCustom48h12.h>
 #include <apriltag/tagStandard41h12.h>
 #include <apriltag/tagStandard52h13.h>
+#include <opencv2/aruco.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "libbtf/core/error.h"
+
+// Exported by Debian's libapriltag 3.3 (and declared only in its sources): the quad stage alone.
+// Returns a zarray of struct quad (corners only; H and Hinv are still null).
+extern "C" zarray_t* apriltag_quad_thresh(apriltag_detector_t* td, image_u8_t* im);
 
 namespace btf {
 namespace {
@@ -46,18 +55,82 @@ const std::vector<FamilyEntry>& Families() {
   return f;
 }
 
+struct ArucoEntry {
+  const char* name;
+  int dict;
+};
+const std::vector<ArucoEntry>& ArucoDictionaries() {
+  namespace a = cv::aruco;
+  static const std::vector<ArucoEntry> d = {
+      {"DICT_4X4_50", a::DICT_4X4_50},         {"DICT_4X4_100", a::DICT_4X4_100},
+      {"DICT_4X4_250", a::DICT_4X4_250},       {"DICT_4X4_1000", a::DICT_4X4_1000},
+      {"DICT_5X5_50", a::DICT_5X5_50},         {"DICT_5X5_100", a::DICT_5X5_100},
+      {"DICT_5X5_250", a::DICT_5X5_250},       {"DICT_5X5_1000", a::DICT_5X5_1000},
+      {"DICT_6X6_50", a::DICT_6X6_50},         {"DICT_6X6_100", a::DICT_6X6_100},
+      {"DICT_6X6_250", a::DICT_6X6_250},       {"DICT_6X6_1000", a::DICT_6X6_1000},
+      {"DICT_7X7_50", a::DICT_7X7_50},         {"DICT_7X7_100", a::DICT_7X7_100},
+      {"DICT_7X7_250", a::DICT_7X7_250},       {"DICT_7X7_1000", a::DICT_7X7_1000},
+      {"DICT_ARUCO_ORIGINAL", a::DICT_ARUCO_ORIGINAL}, {"DICT_APRILTAG_16h5", a::DICT_APRILTAG_16h5},
+      {"DICT_APRILTAG_25h9", a::DICT_APRILTAG_25h9},   {"DICT_APRILTAG_36h10", a::DICT_APRILTAG_36h10},
+      {"DICT_APRILTAG_36h11", a::DICT_APRILTAG_36h11},
+  };
+  return d;
+}
+constexpr const char* kArucoPrefix = "aruco:";
+
+std::string KnownFamilies() {
+  std::string known;
+  for (const auto& e : Families()) known += std::string(known.empty() ? "" : ", ") + e.name;
+  return known + ", or aruco:DICT_4X4_50 .. aruco:DICT_APRILTAG_36h11 (OpenCV's predefined dictionaries)";
+}
+
 const FamilyEntry& FindFamily(const std::string& name) {
   for (const auto& e : Families())
     if (name == e.name) return e;
-  std::string known;
-  for (const auto& e : Families()) known += std::string(known.empty() ? "" : ", ") + e.name;
-  ThrowUsage("unknown tag family '{}': use one of {}", name, known);
+  ThrowUsage("unknown tag family '{}': use one of {}", name, KnownFamilies());
+}
+
+int FindAruco(const std::string& family) {
+  const std::string name = family.substr(std::string(kArucoPrefix).size());
+  for (const auto& e : ArucoDictionaries())
+    if (name == e.name) return e.dict;
+  ThrowUsage("unknown ArUco dictionary '{}': use one of {}", family, KnownFamilies());
+}
+
+// Families whose black border is the outer ring of the detection square (every data bit inside
+// it): only these can carry a wider border.
+bool ClassicFamily(const std::string& name) {
+  return name == "tag16h5" || name == "tag25h9" || name == "tag36h10" || name == "tag36h11";
 }
 
 }  // namespace
 
+bool IsArucoFamily(const std::string& family) { return family.rfind(kArucoPrefix, 0) == 0; }
+
+int DetectionSquareModules(const std::string& family, int border_bits) {
+  if (IsArucoFamily(family)) {
+    const cv::Ptr<cv::aruco::Dictionary> d =
+        cv::aruco::getPredefinedDictionary(static_cast<cv::aruco::PREDEFINED_DICTIONARY_NAME>(FindAruco(family)));
+    return d->markerSize + 2 * border_bits;
+  }
+  const FamilyEntry& e = FindFamily(family);
+  apriltag_family_t* f = e.create();
+  const int w = f->width_at_border + 2 * (border_bits - 1);
+  e.destroy(f);
+  return w;
+}
+
 void TagDetectorOptions::Check() const {
-  FindFamily(family);
+  if (IsArucoFamily(family)) {
+    FindAruco(family);
+  } else {
+    FindFamily(family);
+    if (border_bits != 1 && !ClassicFamily(family))
+      ThrowUsage("invalid option 'border_bits': {} has data bits outside its border ring; a {}-bit border is "
+                 "supported for tag16h5, tag25h9, tag36h10 and tag36h11 only",
+                 family, border_bits);
+  }
+  BTF_CHECK_OPTION(border_bits >= 1 && border_bits <= 2, "border_bits", "1 or 2");
   BTF_CHECK_OPTION(bits_corrected >= 0 && bits_corrected <= 3, "bits_corrected", "0..3");
   BTF_CHECK_OPTION(quad_decimate >= 1 && quad_decimate <= 8, "quad_decimate", "1..8");
   BTF_CHECK_OPTION(decode_sharpening >= 0 && decode_sharpening <= 4, "decode_sharpening", "0..4");
@@ -69,13 +142,24 @@ void TagDetectorOptions::Check() const {
 std::vector<std::string> TagFamilies() {
   std::vector<std::string> names;
   for (const auto& e : Families()) names.emplace_back(e.name);
+  for (const auto& e : ArucoDictionaries()) names.push_back(std::string(kArucoPrefix) + e.name);
   return names;
 }
 
 struct TagDetector::Impl {
   const FamilyEntry* entry = nullptr;
   apriltag_family_t* family = nullptr;
+  // A wider border: a copy of the family with the detection square border_bits - 1 modules wider
+  // on each side and the data bits shifted inwards by as much (codes shared with `family`).
+  apriltag_family_t wide{};
+  std::vector<std::uint32_t> wide_x, wide_y;
+  std::string wide_name;
   apriltag_detector_t* detector = nullptr;
+  // ArUco (OpenCV): dictionary and parameters; width = modules across the detection square.
+  cv::Ptr<cv::aruco::Dictionary> aruco;
+  cv::Ptr<cv::aruco::DetectorParameters> aruco_params;
+  int modules = 0;
+  const apriltag_family_t* used = nullptr;  // the family libapriltag decodes (the wide copy or the original)
   ~Impl() {
     // The detector references the family: destroy it first (notes 1.1).
     if (detector) apriltag_detector_destroy(detector);
@@ -85,13 +169,41 @@ struct TagDetector::Impl {
 
 TagDetector::TagDetector(const TagDetectorOptions& options) : impl_(std::make_unique<Impl>()), options_(options) {
   options_.Check();
+  if (IsArucoFamily(options_.family)) {
+    impl_->aruco = cv::aruco::getPredefinedDictionary(
+        static_cast<cv::aruco::PREDEFINED_DICTIONARY_NAME>(FindAruco(options_.family)));
+    impl_->aruco_params = cv::aruco::DetectorParameters::create();
+    impl_->aruco_params->markerBorderBits = options_.border_bits;
+    impl_->aruco_params->cornerRefinementMethod = cv::aruco::CORNER_REFINE_NONE;  // our edge fit refines
+    impl_->modules = impl_->aruco->markerSize + 2 * options_.border_bits;
+    return;
+  }
   impl_->entry = &FindFamily(options_.family);
   impl_->family = impl_->entry->create();
   impl_->detector = apriltag_detector_create();
   if (!impl_->family || !impl_->detector) throw Error(ExitCode::kInternal, "libapriltag: cannot create the detector");
+  apriltag_family_t* used = impl_->family;
+  if (options_.border_bits > 1) {
+    const int extra = options_.border_bits - 1;
+    Impl& m = *impl_;
+    m.wide = *m.family;
+    m.wide.width_at_border += 2 * extra;
+    m.wide.total_width += 2 * extra;
+    m.wide_x.assign(m.family->bit_x, m.family->bit_x + m.family->nbits);
+    m.wide_y.assign(m.family->bit_y, m.family->bit_y + m.family->nbits);
+    for (auto& v : m.wide_x) v += static_cast<std::uint32_t>(extra);
+    for (auto& v : m.wide_y) v += static_cast<std::uint32_t>(extra);
+    m.wide.bit_x = m.wide_x.data();
+    m.wide.bit_y = m.wide_y.data();
+    m.wide_name = fmt::format("{}b{}", m.family->name, options_.border_bits);
+    m.wide.name = m.wide_name.data();
+    m.wide.impl = nullptr;  // the decode table: built by add_family_bits, freed by the detector
+    used = &m.wide;
+  }
+  impl_->modules = used->width_at_border;
+  impl_->used = used;
   errno = 0;
-  apriltag_detector_add_family_bits(impl_->detector, impl_->family,
-                                    std::min(options_.bits_corrected, impl_->entry->max_bits));
+  apriltag_detector_add_family_bits(impl_->detector, used, std::min(options_.bits_corrected, impl_->entry->max_bits));
   if (errno == ENOMEM)
     throw Error(ExitCode::kInternal,
                 fmt::format("libapriltag: out of memory building the decode table of {} with {} bits: lower "
@@ -108,6 +220,7 @@ TagDetector::~TagDetector() = default;
 
 std::vector<TagDetection> TagDetector::Detect(const unsigned char* gray, int width, int height, int stride) const {
   if (width < 1 || height < 1 || stride < width) ThrowBadInput("tag detection: bad image size {}x{}", width, height);
+  if (impl_->aruco) return DetectAruco(gray, width, height, stride);
   // AprilTag reads the buffer only (quad_sigma is 0); its struct wants a non-const pointer.
   image_u8_t im{width, height, stride, const_cast<unsigned char*>(gray)};
   errno = 0;
@@ -134,6 +247,126 @@ std::vector<TagDetection> TagDetector::Detect(const unsigned char* gray, int wid
     if (inside) out.push_back(t);  // border-cut tags can decode with wrong corners (notes 1.5)
   }
   apriltag_detections_destroy(dets);
+  std::sort(out.begin(), out.end(), [](const TagDetection& a, const TagDetection& b) { return a.id < b.id; });
+  return out;
+}
+
+bool TagDetector::DecodeQuad(const std::vector<unsigned char>& gray, int w, int h, std::array<Vec2, 4> q,
+                             TagDetection* out) const {
+  const apriltag_family_t& f = *impl_->used;
+  const double W = impl_->modules;
+  // Tag frame (modules, u right, v down, (0,0) = top-left of the detection square) -> AprilTag
+  // pixels, with the quad's corners as TL, TR, BR, BL; reversed if that order is mirrored on screen.
+  const Vec2 e1 = q[1] - q[0], e2 = q[3] - q[0];
+  if (e1.x() * e2.y() - e1.y() * e2.x() < 0) std::swap(q[1], q[3]);
+  cv::Mat H = cv::getPerspectiveTransform(
+      std::vector<cv::Point2f>{{0, 0}, {static_cast<float>(W), 0}, {static_cast<float>(W), static_cast<float>(W)},
+                               {0, static_cast<float>(W)}},
+      std::vector<cv::Point2f>{{static_cast<float>(q[0].x()), static_cast<float>(q[0].y())},
+                               {static_cast<float>(q[1].x()), static_cast<float>(q[1].y())},
+                               {static_cast<float>(q[2].x()), static_cast<float>(q[2].y())},
+                               {static_cast<float>(q[3].x()), static_cast<float>(q[3].y())}});
+  const auto map = [&](double u, double v) {
+    const double x = H.at<double>(0, 0) * u + H.at<double>(0, 1) * v + H.at<double>(0, 2);
+    const double y = H.at<double>(1, 0) * u + H.at<double>(1, 1) * v + H.at<double>(1, 2);
+    const double z = H.at<double>(2, 0) * u + H.at<double>(2, 1) * v + H.at<double>(2, 2);
+    return Vec2(x / z, y / z);
+  };
+  bool ok = true;
+  const auto sample = [&](double u, double v) {  // bilinear on the 8-bit image, AprilTag pixel convention
+    const Vec2 p = map(u, v) - Vec2(0.5, 0.5);
+    if (!(p.x() >= 0 && p.y() >= 0 && p.x() <= w - 1 && p.y() <= h - 1)) {
+      ok = false;
+      return 0.0;
+    }
+    const int x0 = std::min(static_cast<int>(p.x()), w - 2), y0 = std::min(static_cast<int>(p.y()), h - 2);
+    const double fx = p.x() - x0, fy = p.y() - y0;
+    const unsigned char* r0 = &gray[static_cast<std::size_t>(y0) * w + x0];
+    const unsigned char* r1 = r0 + w;
+    return (1 - fy) * ((1 - fx) * r0[0] + fx * r0[1]) + fy * ((1 - fx) * r1[0] + fx * r1[1]);
+  };
+  // Black level: the border ring half a module inside; white: half a module outside.
+  double black = 0, white = 0;
+  int n = 0;
+  for (int k = 0; k < static_cast<int>(W); ++k) {
+    const double t = k + 0.5;
+    black += sample(t, 0.5) + sample(t, W - 0.5) + sample(0.5, t) + sample(W - 0.5, t);
+    white += sample(t, -0.5) + sample(t, W + 0.5) + sample(-0.5, t) + sample(W + 0.5, t);
+    n += 4;
+  }
+  if (!ok) return false;
+  black /= n, white /= n;
+  if (!(white - black > 20)) return false;
+  const double thr = 0.5 * (black + white);
+  // The code read in each of the 4 rotations of the tag frame; best match over the family.
+  int best_h = 99, best_id = -1, best_rot = 0;
+  double margin = 0;
+  for (int rot = 0; rot < 4; ++rot) {
+    std::uint64_t code = 0;
+    double m = 1e9;
+    for (std::uint32_t i = 0; i < f.nbits; ++i) {
+      double u = f.bit_x[i] + 0.5, v = f.bit_y[i] + 0.5;
+      for (int r = 0; r < rot; ++r) std::tie(u, v) = std::make_pair(W - v, u);  // 90 deg on screen
+      const double val = sample(u, v);
+      code = (code << 1) | (val > thr ? 1u : 0u);
+      m = std::min(m, std::abs(val - thr));
+    }
+    if (!ok) return false;
+    for (std::uint32_t id = 0; id < f.ncodes; ++id) {
+      const int hd = __builtin_popcountll(code ^ f.codes[id]);
+      if (hd < best_h) best_h = hd, best_id = static_cast<int>(id), best_rot = rot, margin = m;
+    }
+  }
+  // The margin here is the smallest |sample - threshold| over the data bits in 8-bit grey levels
+  // (libapriltag's decision margin is a different statistic): a quarter of min_decision_margin.
+  if (best_id < 0 || best_h > options_.max_hamming || margin < options_.min_decision_margin / 4) return false;
+  // Corners of the upright tag (LB, RB, RT, LT in its frame) through the same rotation, into
+  // OpenCV's pixel convention.
+  const std::array<Vec2, 4> upright = {Vec2(0, W), Vec2(W, W), Vec2(W, 0), Vec2(0, 0)};
+  out->id = best_id;
+  out->hamming = best_h;
+  out->decision_margin = margin;
+  Vec2 centre = Vec2::Zero();
+  for (int k = 0; k < 4; ++k) {
+    double u = upright[static_cast<std::size_t>(k)].x(), v = upright[static_cast<std::size_t>(k)].y();
+    for (int r = 0; r < best_rot; ++r) std::tie(u, v) = std::make_pair(W - v, u);
+    out->corners[k] = map(u, v) - Vec2(0.5, 0.5);
+    centre += 0.25 * out->corners[k];
+    const double mg = options_.border_margin_px;
+    const Vec2& c = out->corners[k];
+    if (!(c.x() >= mg && c.y() >= mg && c.x() <= w - 1 - mg && c.y() <= h - 1 - mg)) return false;
+  }
+  out->center = centre;
+  return true;
+}
+
+std::vector<TagDetection> TagDetector::DetectAruco(const unsigned char* gray, int width, int height, int stride) const {
+  const cv::Mat im(height, width, CV_8UC1, const_cast<unsigned char*>(gray), static_cast<std::size_t>(stride));
+  std::vector<std::vector<cv::Point2f>> corners;
+  std::vector<int> ids;
+  cv::aruco::detectMarkers(im, impl_->aruco, corners, ids, impl_->aruco_params);
+  std::vector<TagDetection> out;
+  // OpenCV's order is clockwise from the marker's top-left (TL, TR, BR, BL), pixel centers at
+  // integers (no shift). Ours is LB, RB, RT, LT of the upright marker. OpenCV 4.6 draws its
+  // DICT_APRILTAG_* markers rotated by 180 degrees relative to apriltag-imgs (notes 1.3), so for
+  // those the upright printed tag's LB is OpenCV's TR.
+  const bool apriltag_dict = options_.family.find("APRILTAG") != std::string::npos;
+  const std::array<int, 4> order = apriltag_dict ? std::array<int, 4>{1, 0, 3, 2} : std::array<int, 4>{3, 2, 1, 0};
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    TagDetection t;
+    t.id = ids[i];
+    bool inside = true;
+    Vec2 c = Vec2::Zero();
+    for (int k = 0; k < 4; ++k) {
+      const cv::Point2f& p = corners[i][static_cast<std::size_t>(order[static_cast<std::size_t>(k)])];
+      t.corners[k] = Vec2(p.x, p.y);
+      c += 0.25 * t.corners[k];
+      const double m = options_.border_margin_px;
+      if (!(p.x >= m && p.y >= m && p.x <= width - 1 - m && p.y <= height - 1 - m)) inside = false;
+    }
+    t.center = c;
+    if (inside) out.push_back(t);
+  }
   std::sort(out.begin(), out.end(), [](const TagDetection& a, const TagDetection& b) { return a.id < b.id; });
   return out;
 }
@@ -178,7 +411,10 @@ double Bilinear(const std::vector<float>& g, int w, int h, double x, double y, b
 
 std::vector<unsigned char> GrayForDetection(const Image& image) { return Quantize(LinearGray(image)); }
 
-bool RefineTagCorners(const std::vector<float>& gray, int w, int h, int modules, std::array<Vec2, 4>* corners) {
+
+
+bool RefineTagCorners(const std::vector<float>& gray, int w, int h, int modules, std::array<Vec2, 4>* corners,
+                      double max_move_px) {
   if (w < 2 || h < 2) return false;
   for (int pass = 0; pass < 2; ++pass) {
     std::array<Vec2, 4>& c = *corners;
@@ -238,7 +474,7 @@ bool RefineTagCorners(const std::vector<float>& gray, int w, int h, int modules,
       const Eigen::Vector3d x = lines[(k + 3) % 4].cross(lines[k]);
       if (!(std::abs(x.z()) > 1e-12)) return false;
       refined[k] = x.head<2>() / x.z();
-      if (!refined[k].allFinite() || (refined[k] - c[k]).norm() > 3.0) return false;  // refinement must stay local
+      if (!refined[k].allFinite() || (refined[k] - c[k]).norm() > max_move_px) return false;  // must stay local
     }
     c = refined;
   }
@@ -250,10 +486,56 @@ std::vector<TagDetection> TagDetector::Detect(const Image& image) const {
   const std::vector<float> gray = LinearGray(image);
   const std::vector<unsigned char> gray8 = Quantize(gray);
   std::vector<TagDetection> dets = Detect(gray8.data(), image.width, image.height, image.width);
+  if (options_.split_touching && options_.border_bits >= 2 && !impl_->aruco) {
+    // Kalibr's corner squares touch the tags diagonally; wherever the thresholded image joins them
+    // (or splits the white gaps at the joints), libapriltag's segmentation finds no quad for the tag.
+    const int w = image.width, h = image.height;
+    // 1. Dark regions eroded by a 3 x 3 maximum (symmetric: no shift): the joints open, libapriltag
+    //    finds the quads, but thin data modules may erode away, so the ids are not trusted yet.
+    //    On the sRGB-encoded image: its brighter mid-tones open the joints further.
+    std::vector<unsigned char> encoded(gray8.size()), eroded(gray8.size());
+    for (std::size_t i = 0; i < gray8.size(); ++i)
+      encoded[i] = static_cast<unsigned char>(std::lround(255 * LinearToSrgb(gray8[i] / 255.0f)));
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        unsigned char v = 0;
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx)
+            v = std::max(v, encoded[static_cast<std::size_t>(std::clamp(y + dy, 0, h - 1)) * w + std::clamp(x + dx, 0, w - 1)]);
+        eroded[static_cast<std::size_t>(y) * w + x] = v;
+      }
+    // 2. Each quad found there is decoded on the original image (DecodeQuad); only ids the first
+    //    pass missed are added.
+    image_u8_t eim{w, h, w, eroded.data()};
+    zarray_t* quads = apriltag_quad_thresh(impl_->detector, &eim);
+    if (!quads) throw Error(ExitCode::kInternal, "libapriltag: quad detection failed");
+    for (int i = 0; i < zarray_size(quads); ++i) {
+      struct quad* q = nullptr;
+      zarray_get_volatile(quads, i, &q);
+      std::array<Vec2, 4> c;
+      for (int k = 0; k < 4; ++k) c[k] = Vec2(q->p[k][0], q->p[k][1]);
+      std::free(q->H);  // null here; a 3.3 matd_t is one calloc block (notes 1.1)
+      std::free(q->Hinv);
+      TagDetection d;
+      if (!DecodeQuad(gray8, w, h, c, &d)) continue;
+      if (std::any_of(dets.begin(), dets.end(), [&](const TagDetection& e) { return e.id == d.id; })) continue;
+      // These corners can be a few px inside the true ones (erosion, the cut joints, the encoded
+      // threshold): one fit allowed to move further brings them within the final fit's reach.
+      if (options_.refine_corners) {
+        std::array<Vec2, 4> r = d.corners;
+        const double reach = 0.7 * (r[0] - r[2]).norm() / impl_->modules + 3.0;  // ~ a module + 3 px
+        if (!RefineTagCorners(gray, w, h, impl_->modules, &r, reach)) continue;  // no usable edges: leave it out
+        d.corners = r;
+      }
+      dets.push_back(d);
+    }
+    zarray_destroy(quads);
+    std::sort(dets.begin(), dets.end(), [](const TagDetection& a, const TagDetection& b) { return a.id < b.id; });
+  }
   if (options_.refine_corners)
     for (auto& d : dets) {
       std::array<Vec2, 4> c = d.corners;
-      if (RefineTagCorners(gray, image.width, image.height, impl_->family->width_at_border, &c)) d.corners = c;
+      if (RefineTagCorners(gray, image.width, image.height, impl_->modules, &c)) d.corners = c;
     }
   return dets;
 }

@@ -1,5 +1,12 @@
 #pragma once
-// Fiducial detection with libapriltag (Debian 3.3.0).
+// Fiducial detection with libapriltag (Debian 3.3.0) and, for ArUco dictionaries, OpenCV's aruco
+// module (Debian 4.6, contrib).
+//
+// Families: libapriltag's nine (`tag36h11`, ...), with a black border of `border_bits` modules (1:
+// apriltag-imgs; 2: Kalibr's AprilGrid), or `aruco:DICT_5X5_100` etc. (OpenCV's predefined
+// dictionaries, markerBorderBits = border_bits). A 2-bit AprilTag border is decoded by
+// libapriltag itself through a copy of the family whose detection square is 2 modules wider and
+// whose data bits are shifted 1 module inwards (the quad is the same black square).
 //
 // Corner order: AprilTag's, for the upright printed tag: left-bottom, right-bottom, right-top,
 // left-top of the detection square (the black border's outer edge); this is the board file's order.
@@ -16,16 +23,22 @@
 namespace btf {
 
 struct TagDetectorOptions {
-  std::string family = "tag36h11";  // any family libapriltag 3.3 compiles in (see TagFamilies())
+  std::string family = "tag36h11";  // any family libapriltag 3.3 compiles in (see TagFamilies()), or
+                                    // "aruco:DICT_..." (OpenCV's predefined dictionaries)
+  int border_bits = 1;              // black border width, modules: 1 or 2 (2 = Kalibr AprilGrid). AprilTag:
+                                    // classic families only (tag16h5, tag25h9, tag36h10, tag36h11) for 2
   int bits_corrected = 2;           // error-correction bits; 48h12/52h13 are capped at 1 (table size)
   double quad_decimate = 1.0;       // 1 = full resolution (decimation biases corners, notes 1.2)
   bool refine_edges = false;        // libapriltag's edge refinement: biased by -0.125 px in 3.3.0 (integer
                                     // sampling; measured in tests/register/detect_test.cpp), so off
   bool refine_corners = true;       // our own sub-pixel edge fit on the linear float image (see below)
   double decode_sharpening = 0.25;  // libapriltag default
-  int max_hamming = 1;              // detections correcting more bits are dropped (false positives)
-  double min_decision_margin = 20;  // weaker detections are dropped
+  int max_hamming = 1;              // detections correcting more bits are dropped (false positives; AprilTag only)
+  double min_decision_margin = 20;  // weaker detections are dropped (AprilTag only; ArUco reports 0)
   double border_margin_px = 2;      // tags with a corner closer than this to the image edge are dropped
+  bool split_touching = true;       // with border_bits 2 (AprilGrid), AprilTag only: a second pass on the image
+                                    // with dark regions eroded by a 2 x 2 window finds tags whose corners touch
+                                    // the grid's corner squares (libapriltag merges those into one blob)
   void Check() const;
 };
 
@@ -37,8 +50,13 @@ struct TagDetection {
   Vec2 center = Vec2::Zero();   // px, OpenCV convention
 };
 
-// Families this build can create.
+// Families this build can create (libapriltag's, then "aruco:DICT_..." names).
 std::vector<std::string> TagFamilies();
+bool IsArucoFamily(const std::string& family);
+
+// Modules across the detection square (outer edge of the black border) of `family` with a border
+// of `border_bits` modules (tag36h11: 8 with 1 bit, 10 with 2).
+int DetectionSquareModules(const std::string& family, int border_bits);
 
 // One libapriltag detector and family instance. Not thread-safe: use one per thread (notes 1.5).
 class TagDetector {
@@ -55,6 +73,9 @@ class TagDetector {
   const TagDetectorOptions& options() const { return options_; }
 
  private:
+  std::vector<TagDetection> DetectAruco(const unsigned char* gray, int width, int height, int stride) const;
+  // Decodes the quad q (AprilTag pixel convention) on `gray` with the family's bit layout.
+  bool DecodeQuad(const std::vector<unsigned char>& gray, int w, int h, std::array<Vec2, 4> q, TagDetection* out) const;
   struct Impl;
   std::unique_ptr<Impl> impl_;
   TagDetectorOptions options_;
@@ -65,8 +86,10 @@ class TagDetector {
 // the quiet-zone level (half a module outside) is located on profiles normal to the edge in the
 // linear gray image (exact for a straight edge under any symmetric blur); a total-least-squares
 // line per edge; corners = intersections of adjacent lines. Two passes. `modules` = the family's
-// width_at_border. Returns false (corners unchanged) if an edge has too few valid profiles.
-bool RefineTagCorners(const std::vector<float>& gray, int width, int height, int modules, std::array<Vec2, 4>* corners);
+// width_at_border. Returns false (corners unchanged) if an edge has too few valid profiles or a
+// corner would move by more than `max_move_px`.
+bool RefineTagCorners(const std::vector<float>& gray, int width, int height, int modules, std::array<Vec2, 4>* corners,
+                      double max_move_px = 3.0);
 
 // Linear gray (Rec.709 luminance for 3+ channels) scaled so the 99.5th percentile maps to 255.
 // Stays linear on purpose: AprilTag thresholds at the mid level, and under a symmetric blur the

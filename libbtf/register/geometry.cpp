@@ -62,7 +62,10 @@ PhotoGeometry EstimateGeometry(const Board& board, const std::vector<TagDetectio
   cv::Mat K, dist;
   if (pose) {
     K = (cv::Mat_<double>(3, 3) << camera->fx, 0, camera->cx, 0, camera->fy, camera->cy, 0, 0, 1);
-    dist = (cv::Mat_<double>(1, 4) << camera->k1, camera->k2, 0, 0);
+    if (camera->has_extended_distortion())
+      dist = (cv::Mat_<double>(1, 5) << camera->k1, camera->k2, camera->p1, camera->p2, camera->k3);
+    else
+      dist = (cv::Mat_<double>(1, 4) << camera->k1, camera->k2, 0, 0);
   }
   std::vector<cv::Point2f> plate_xy;
   std::vector<cv::Point3d> plate3;

@@ -27,10 +27,10 @@ using json = nlohmann::json;
 // Reads a photo; non-finite values become 0 (counted in a warning) so nothing non-finite escapes.
 // A photo named by the manifest but missing is the manifest's problem (bad input, reported per
 // photo); one that exists and cannot be read is a failing disk (I/O: ends the run).
-Image ReadPhoto(const std::filesystem::path& path, std::vector<std::string>* warnings) {
+Image ReadPhoto(const std::filesystem::path& path, std::vector<std::string>* warnings, const ImageReadOptions& input) {
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) ThrowBadInput("'{}': no such photo file", path.string());
-  Image im = ReadImage(path);
+  Image im = ReadImage(path, input);
   if (im.width < 2 || im.height < 2 || im.channels < 1) ThrowBadInput("'{}': empty image", path.string());
   std::size_t bad = 0;
   for (float& v : im.pixels)
@@ -123,6 +123,7 @@ void RegisterOptions::Check() const {
   lattice.Check();
   tiles.Check();
   write.Check();
+  input.Check();
   BTF_CHECK_OPTION(max_invalid_fraction >= 0 && max_invalid_fraction <= 1, "max_invalid_fraction", "0..1");
   BTF_CHECK_OPTION(tile_output == "tiling" || tile_output == "tile", "tile_output", "'tiling' or 'tile'");
   BTF_CHECK_OPTION(contact_sheet_thumb >= 0 && contact_sheet_thumb <= 1024, "contact_sheet_thumb", "0..1024");
@@ -199,9 +200,10 @@ std::string RegisterSummary::Report() const {
   return r;
 }
 
-std::vector<TagDetection> DetectInImage(const std::filesystem::path& image, const TagDetectorOptions& options) {
+std::vector<TagDetection> DetectInImage(const std::filesystem::path& image, const TagDetectorOptions& options,
+                                        const ImageReadOptions& input) {
   TagDetector det(options);
-  return det.Detect(ReadPhoto(image, nullptr));
+  return det.Detect(ReadPhoto(image, nullptr, input));
 }
 
 namespace {
@@ -221,9 +223,21 @@ class Registration {
     if (!o_.truth.empty())
       for (auto& t : ReadTruth(o_.truth)) truth_.emplace(t.file, std::move(t));
     detector_ = o_.detector;
-    if (!o_.family_override) detector_.family = board_.family;
+    if (!o_.family_override) detector_.family = board_.family, detector_.border_bits = board_.border_bits;
     detector_.Check();
     S_ = board_.sample_size_mm;
+    if (!(S_ > 0))
+      ThrowBadInput("'{}': sample_size_mm is 0 (a calibration target, not a sample plate): registration needs the "
+                    "sample region's side",
+                    (dir_ / manifest_.board_file).string());
+    input_ = o_.input;
+    if (input_.colorspace == "auto" && !manifest_.transfer.empty()) input_.colorspace = manifest_.transfer;
+    if (!o_.camera.empty()) {
+      const CameraFile cf = ReadCameraFile(o_.camera);
+      if (cf.model != "radtan")
+        ThrowBadInput("'{}': model '{}': btf-register run supports the radtan model only", o_.camera.string(), cf.model);
+      for (auto& e : manifest_.photos) e.camera = cf.camera;
+    }
     const int np = static_cast<int>(manifest_.photos.size());
     sum_.photos = np;
     sum_.reports.resize(static_cast<std::size_t>(np));
@@ -330,7 +344,7 @@ class Registration {
  private:
   // Reads one photo, detects its markers, fits its geometry and checks that the sample is in view.
   PhotoGeometry FitPhoto(const PhotoEntry& e, const TagDetector& det, PhotoReport& r) const {
-    const Image im = ReadPhoto(dir_ / e.file, &r.warnings);
+    const Image im = ReadPhoto(dir_ / e.file, &r.warnings, input_);
     const bool pose = o_.use_intrinsics && e.camera.fx > 0;
     if (pose && (im.width != e.camera.width || im.height != e.camera.height))
       ThrowBadInput("photo is {}x{} but its camera model in the manifest is {}x{}", im.width, im.height,
@@ -418,7 +432,7 @@ class Registration {
   }
 
   Image RectifyPhoto(const PhotoEntry& e, const PhotoGeometry& g, PhotoReport& r) const {
-    const Image im = ReadPhoto(dir_ / e.file, nullptr);
+    const Image im = ReadPhoto(dir_ / e.file, nullptr, input_);
     RectifyStats st;
     Image tex = Rectify(
         im, [&g](const Vec2& p, Vec2* px) { return g.Project(Vec3(p.x(), p.y(), 0), px); }, S_, o_.rectify, &st);
@@ -549,6 +563,7 @@ class Registration {
   Board board_;
   std::map<std::string, PhotoTruth> truth_;
   TagDetectorOptions detector_;
+  ImageReadOptions input_;
   double S_ = 0;  // sample side, mm
   std::vector<PhotoGeometry> geoms_;
   std::vector<int> view_list_, light_list_;

@@ -28,8 +28,12 @@
 namespace btf {
 
 struct RegisterOptions {
-  TagDetectorOptions detector;    // family: the board's unless set explicitly (family_override)
-  bool family_override = false;   // true = use detector.family even if the board names another
+  TagDetectorOptions detector;    // family and border_bits: the board's unless set explicitly (family_override)
+  bool family_override = false;   // true = use detector.family and border_bits even if the board names others
+  ImageReadOptions input;         // decoding of integer photos; "auto" = the manifest's transfer if stated, else
+                                  // the file's colour-space tag (io/image_io.h)
+  std::filesystem::path camera;   // optional camera.json (btf-register calibrate): replaces every photo's
+                                  // manifest intrinsics (radtan model only)
   GeometryOptions geometry;
   RectifyOptions rectify;         // resolution N (default 256) and the anti-aliasing filter
   bool use_intrinsics = true;     // pose from the manifest camera (marker height, distortion); false = homography
@@ -87,6 +91,7 @@ RegisterSummary RegisterPhotos(const RegisterOptions& options, const std::filesy
                                const std::filesystem::path& output, const Reporter& reporter = {});
 
 // Detection only (btf-register detect).
-std::vector<TagDetection> DetectInImage(const std::filesystem::path& image, const TagDetectorOptions& options);
+std::vector<TagDetection> DetectInImage(const std::filesystem::path& image, const TagDetectorOptions& options,
+                                        const ImageReadOptions& input = {});
 
 }  // namespace btf

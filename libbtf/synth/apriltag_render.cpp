@@ -33,13 +33,17 @@ FamilyPtr OpenFamily(const std::string& name) {
 }  // namespace
 
 
-TagBitmap RenderTag(const std::string& family, int id) {
+TagBitmap RenderTag(const std::string& family, int id, int border_bits) {
   const FamilyPtr f = OpenFamily(family);
   if (id < 0 || id >= static_cast<int>(f->ncodes))
     ThrowUsage("tag id {} is outside family {} (0..{})", id, family, f->ncodes - 1);
+  if (border_bits < 1 || border_bits > 2 || (border_bits > 1 && family == "tagStandard41h12"))
+    ThrowUsage("invalid option 'border_bits': {} for {} (1, or 2 for tag16h5, tag25h9 and tag36h11)", border_bits,
+               family);
+  const int extra = border_bits - 1;
   TagBitmap t;
-  t.total_width = f->total_width;
-  t.width_at_border = f->width_at_border;
+  t.total_width = static_cast<int>(f->total_width) + 2 * extra;
+  t.width_at_border = static_cast<int>(f->width_at_border) + 2 * extra;
   const int T = t.total_width, B = t.width_at_border;
   const int border_start = (T - B) / 2;  // first module of the detection square
   t.modules.assign(static_cast<std::size_t>(T * T), 0);
@@ -55,8 +59,8 @@ TagBitmap RenderTag(const std::string& family, int id) {
   const std::uint64_t code = f->codes[id];
   for (std::uint32_t i = 0; i < f->nbits; ++i) {
     const bool white = (code >> (f->nbits - 1 - i)) & 1u;
-    const int r = border_start + static_cast<std::int32_t>(f->bit_y[i]);
-    const int c = border_start + static_cast<std::int32_t>(f->bit_x[i]);
+    const int r = border_start + extra + static_cast<std::int32_t>(f->bit_y[i]);
+    const int c = border_start + extra + static_cast<std::int32_t>(f->bit_x[i]);
     if (r >= 0 && r < T && c >= 0 && c < T) t.modules[static_cast<std::size_t>(r * T + c)] = white ? 1 : 0;
   }
   return t;

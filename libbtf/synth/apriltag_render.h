@@ -17,7 +17,9 @@ struct TagBitmap {
 };
 
 // Decodes code `id` of `family` ("tag36h11", "tag25h9", "tag16h5", "tagStandard41h12") into its
-// module grid. Throws btf::Error (usage) for an unknown family or an id outside the family.
-TagBitmap RenderTag(const std::string& family, int id);
+// module grid. `border_bits` = black border width in modules (2: Kalibr AprilGrid; the detection
+// square grows by 2 modules, the data bits stay centred; not for tagStandard41h12). Throws
+// btf::Error (usage) for an unknown family, an id outside the family or a bad border.
+TagBitmap RenderTag(const std::string& family, int id, int border_bits = 1);
 
 }  // namespace btf

@@ -29,7 +29,7 @@ std::vector<MarkerGeom> MarkerGeometry(const Board& board) {
   std::vector<MarkerGeom> out;
   for (const Marker& m : board.markers) {
     MarkerGeom g;
-    g.bitmap = RenderTag(board.family, m.id);
+    g.bitmap = RenderTag(board.family, m.id, board.border_bits);
     g.width_at_border = g.bitmap.width_at_border;
     g.border_start = (g.bitmap.total_width - g.width_at_border) / 2;
     g.origin = m.corners_mm[0];
@@ -58,10 +58,50 @@ double PlateHalfSize(const Board& board) {
   double e = board.sample_size_mm / 2;
   for (const Marker& m : board.markers)
     for (const Vec2& c : m.corners_mm) e = std::max({e, std::abs(c.x()), std::abs(c.y())});
-  // Markers' quiet zone and a margin of white paper beyond the outermost detection squares.
-  const TagBitmap probe = RenderTag(board.family, board.markers[0].id);
+  // Markers' quiet zone and a margin of white paper beyond the outermost detection squares (and
+  // beyond an AprilGrid's outer corner squares).
+  const TagBitmap probe = RenderTag(board.family, board.markers[0].id, board.border_bits);
   const double module = (board.markers[0].corners_mm[1] - board.markers[0].corners_mm[0]).norm() / probe.width_at_border;
+  if (board.grid.valid()) e += board.grid.spacing * board.grid.tag_size_mm;
   return e + 3 * module;
+}
+
+// An AprilGrid's black corner squares (side = the gap) at every tag corner: true if p is in one.
+bool InGridCornerSquare(const AprilGrid& g, const Vec2& p) {
+  const double s = g.tag_size_mm, gap = g.spacing * s, pitch = s + gap;
+  const double w = g.cols * s + (g.cols - 1) * gap, h = g.rows * s + (g.rows - 1) * gap;
+  const double u = (p.x() + w / 2 + gap) / pitch, v = (p.y() + h / 2 + gap) / pitch;
+  const double iu = std::floor(u), iv = std::floor(v);
+  if (iu < 0 || iv < 0 || iu > g.cols || iv > g.rows) return false;
+  return (u - iu) * pitch < gap && (v - iv) * pitch < gap;
+}
+
+// Separable Gaussian blur of every channel, edges clamped.
+void GaussianBlur(Image& img, double sigma) {
+  if (sigma <= 0) return;
+  const int r = static_cast<int>(std::ceil(4 * sigma));
+  std::vector<double> k(static_cast<std::size_t>(2 * r + 1));
+  double sum = 0;
+  for (int i = -r; i <= r; ++i) sum += k[static_cast<std::size_t>(i + r)] = std::exp(-0.5 * i * i / (sigma * sigma));
+  for (auto& v : k) v /= sum;
+  const int W = img.width, H = img.height, C = img.channels;
+  Image tmp(W, H, C);
+#pragma omp parallel for
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x)
+      for (int c = 0; c < C; ++c) {
+        double a = 0;
+        for (int i = -r; i <= r; ++i) a += k[static_cast<std::size_t>(i + r)] * img.at(std::clamp(x + i, 0, W - 1), y, c);
+        tmp.at(x, y, c) = static_cast<float>(a);
+      }
+#pragma omp parallel for
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x)
+      for (int c = 0; c < C; ++c) {
+        double a = 0;
+        for (int i = -r; i <= r; ++i) a += k[static_cast<std::size_t>(i + r)] * tmp.at(x, std::clamp(y + i, 0, H - 1), c);
+        img.at(x, y, c) = static_cast<float>(a);
+      }
 }
 
 }  // namespace
@@ -85,7 +125,18 @@ void PhotoOptions::Check() const {
   BTF_CHECK_OPTION(pixel_samples >= 1 && pixel_samples <= 16, "pixel-samples", "1..16 per axis");
   BTF_CHECK_OPTION(std::isfinite(light_distance_mm) && light_distance_mm >= 0, "light-distance", ">= 0 mm");
   BTF_CHECK_OPTION(std::isfinite(light_intensity) && light_intensity >= 0, "light-intensity", ">= 0");
-  BTF_CHECK_OPTION(format == "png16" || format == "png8" || format == "exr", "format", "png16, png8 or exr");
+  BTF_CHECK_OPTION(format == "png16" || format == "png8" || format == "jpeg" || format == "exr", "format",
+                   "png16, png8, jpeg or exr");
+  BTF_CHECK_OPTION(transfer == "linear" || transfer == "srgb", "transfer", "linear or srgb");
+  BTF_CHECK_OPTION(!(format == "exr" && transfer != "linear"), "transfer", "linear for exr (float)");
+  BTF_CHECK_OPTION(jpeg_quality >= 1 && jpeg_quality <= 100, "jpeg-quality", "1..100");
+  BTF_CHECK_OPTION(std::isfinite(blur_px) && blur_px >= 0 && blur_px <= 20, "blur", "0..20 px");
+  BTF_CHECK_OPTION(target == "ring" || target == "aprilgrid", "target", "ring or aprilgrid");
+  BTF_CHECK_OPTION(border_bits >= 0 && border_bits <= 2, "border-bits", "0 (auto), 1 or 2");
+  BTF_CHECK_OPTION(grid_rows >= 1 && grid_cols >= 1 && grid_rows * grid_cols <= 587, "grid-rows/grid-cols",
+                   "1.. tags, at most 587 in all (tag36h11)");
+  BTF_CHECK_OPTION(std::isfinite(grid_tag_mm) && grid_tag_mm >= 0, "grid-tag-mm", ">= 0 (0 = auto)");
+  BTF_CHECK_OPTION(std::isfinite(grid_spacing) && grid_spacing > 0 && grid_spacing < 2, "grid-spacing", "(0, 2)");
   BTF_CHECK_OPTION(std::isfinite(exposure) && exposure >= 0, "exposure", ">= 0 (0 = auto)");
   BTF_CHECK_OPTION(std::isfinite(noise) && noise >= 0 && noise <= 1, "noise", "0..1 of full scale");
 }
@@ -101,10 +152,25 @@ std::string PhotoSummary::Report() const {
 }
 
 Board MakeBoard(const PhotoOptions& o, double tile_mm) {
+  if (o.target == "aprilgrid") {
+    AprilGrid g;
+    g.rows = o.grid_rows;
+    g.cols = o.grid_cols;
+    g.spacing = o.grid_spacing;
+    g.tag_size_mm = o.grid_tag_mm;
+    if (g.tag_size_mm <= 0) {
+      const double span = std::max(g.rows, g.cols) + (std::max(g.rows, g.cols) - 1) * g.spacing;  // in tag sides
+      g.tag_size_mm = o.focal_px > 0 ? 0.85 * std::min(o.width, o.height) * o.camera_distance_mm / o.focal_px / span : 88.0;
+    }
+    Board b = MakeAprilGridBoard(g, o.family, o.border_bits > 0 ? o.border_bits : 2);
+    b.Check("generated AprilGrid");
+    return b;
+  }
   Board b;
   b.family = o.family;
+  b.border_bits = o.border_bits > 0 ? o.border_bits : 1;
   b.sample_size_mm = o.sample_tiles * tile_mm;
-  const TagBitmap probe = RenderTag(o.family, 0);
+  const TagBitmap probe = RenderTag(o.family, 0, b.border_bits);
   const double m = o.module_mm > 0 ? o.module_mm : b.sample_size_mm / 20;
   const double det = probe.width_at_border * m, card = probe.total_width * m;
   // Card centers one module outside the sample edge, in a ring of 8 (corners and mid-sides).
@@ -213,7 +279,24 @@ Image RenderPhoto(const SvbrdfModel& model, const Board& board, const PhotoOptio
             double* a = &acc[static_cast<std::size_t>(px) * 3];
             // Marker cards first (they lie at or above the material surface).
             bool hit = false;
+            const MarkerGeom* only = nullptr;  // AprilGrid: the one tag whose cell holds the point
+            if (board.grid.valid()) {  // corner squares and tags, all in the plane z = 0
+              const double t = -cam.center.z() / dir.z();
+              const Vec3 X = cam.center + t * dir;
+              if (InGridCornerSquare(board.grid, X.head<2>())) {
+                const double L = kBlack / kPi * irradiance(X);
+                a[0] += L, a[1] += L, a[2] += L;
+                continue;
+              }
+              const AprilGrid& gr = board.grid;
+              const double s = gr.tag_size_mm, gap = gr.spacing * s, pitch = s + gap;
+              const double c = std::floor((X.x() + (gr.cols * pitch - gap) / 2 + gap / 2) / pitch);
+              const double r = std::floor((X.y() + (gr.rows * pitch - gap) / 2 + gap / 2) / pitch);
+              if (c >= 0 && r >= 0 && c < gr.cols && r < gr.rows)
+                only = &markers[static_cast<std::size_t>(r * gr.cols + c)];
+            }
             for (const MarkerGeom& g : markers) {
+              if (board.grid.valid() && &g != only) continue;
               const double t = (g.height - cam.center.z()) / dir.z();
               const Vec3 X = cam.center + t * dir;
               const double alb = MarkerAlbedo(g, X.head<2>());
@@ -227,7 +310,7 @@ Image RenderPhoto(const SvbrdfModel& model, const Board& board, const PhotoOptio
             const double t0 = -cam.center.z() / dir.z();
             const Vec3 X = cam.center + t0 * dir;
             const double E = irradiance(X);
-            if (std::abs(X.x()) <= half_sample && std::abs(X.y()) <= half_sample) {
+            if (half_sample > 0 && std::abs(X.x()) <= half_sample && std::abs(X.y()) <= half_sample) {
               const Vec2 uv = warp.Apply(Vec2((X.x() + half_sample) / tile, (X.y() + half_sample) / tile));
               if (o.true_directions) {
                 float f[3];
@@ -290,7 +373,8 @@ PhotoSummary SynthesizePhotos(const PhotoOptions& o, const SvbrdfModel& model, c
   manifest.board_file = "board.json";
   manifest.views = o.views;
   manifest.lights = o.lights;
-  manifest.bit_depth = o.format == "exr" ? 0 : (o.format == "png8" ? 8 : 16);
+  manifest.bit_depth = o.format == "exr" ? 0 : (o.format == "png8" || o.format == "jpeg" ? 8 : 16);
+  if (o.transfer != "linear" || o.format == "jpeg") manifest.transfer = o.transfer;
   manifest.extra = extra.is_object() ? extra : nlohmann::json::object();
   manifest.extra["model"] = model.Describe();
   manifest.extra["model_name"] = model.name();
@@ -301,14 +385,20 @@ PhotoSummary SynthesizePhotos(const PhotoOptions& o, const SvbrdfModel& model, c
   manifest.extra["pixel_samples_per_axis"] = o.pixel_samples;
   manifest.extra["directions"] = o.true_directions ? "per point (true)" : "nominal per photo";
   manifest.extra["noise_sd"] = o.noise;
+  // Keys of the newer options only when they are used (the default manifest stays as it was).
+  if (o.blur_px > 0) manifest.extra["blur_sigma_px"] = o.blur_px;
+  if (o.format == "jpeg") manifest.extra["jpeg_quality"] = o.jpeg_quality;
+  if (o.target != "ring") manifest.extra["target"] = o.target;
   std::vector<PhotoTruth> truth;
   PhotoSummary summary;
   PhaseTimes times;
   ImageWriteOptions wopt;
   wopt.has_format = true;
-  wopt.format = o.format == "exr" ? PixelFormat::kFloat : (o.format == "png8" ? PixelFormat::kUint8 : PixelFormat::kUint16);
-  wopt.srgb = false;
-  const std::string ext = o.format == "exr" ? ".exr" : ".png";
+  wopt.format = o.format == "exr" ? PixelFormat::kFloat
+                : (o.format == "png8" || o.format == "jpeg" ? PixelFormat::kUint8 : PixelFormat::kUint16);
+  wopt.srgb = o.transfer == "srgb";
+  wopt.jpeg_quality = o.jpeg_quality;
+  const std::string ext = o.format == "exr" ? ".exr" : (o.format == "jpeg" ? ".jpg" : ".png");
   for (std::size_t k = 0; k < pairs.size(); ++k) {
     reporter.Progress(k, pairs.size(), "photos");
     const auto [vi, li] = pairs[k];
@@ -316,6 +406,7 @@ PhotoSummary SynthesizePhotos(const PhotoOptions& o, const SvbrdfModel& model, c
     const CameraPose cam = MakeCamera(o, board, vdir);
     Timer t;
     Image img = RenderPhoto(model, board, o, cam, vdir, ldir);
+    GaussianBlur(img, o.blur_px);
     times.Add("render", t.Seconds());
     t.Restart();
     double peak = 0;

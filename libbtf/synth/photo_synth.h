@@ -30,6 +30,13 @@ struct PhotoOptions {
   double module_mm = 0;           // marker module size; 0 = sample side / 20
   double marker_height_mm = 0;    // marker plane above the material surface
   std::string family = "tag36h11";
+  std::string target = "ring";    // "ring": the sample with 8 markers around it; "aprilgrid": a Kalibr
+                                  // AprilGrid (no sample; a calibration target)
+  int border_bits = 0;            // black tag border, modules; 0 = 1 (ring) or 2 (aprilgrid, as Kalibr)
+  int grid_rows = 6, grid_cols = 6;  // aprilgrid: tags
+  double grid_tag_mm = 0;         // aprilgrid: tag side; 0 = the grid spans 85 % of min(width, height) at 0 deg
+                                  // when focal is given, else 88 mm (Kalibr's 6 x 6 grid)
+  double grid_spacing = 0.3;      // aprilgrid: gap / tag side (Kalibr tagSpacing)
   double irregularity = 0;        // PatternWarp RMS displacement, tiles (as btf-synth btf)
   std::uint64_t irregularity_seed = 7;
   // Camera.
@@ -38,12 +45,15 @@ struct PhotoOptions {
   double focal_px = 0;            // 0 = the plate fills 90 % of the image height at 0 deg
   double k1 = 0, k2 = 0;          // radial distortion (OpenCV model)
   int pixel_samples = 3;          // per axis, box filter over the pixel
+  double blur_px = 0;             // Gaussian optical blur (PSF) sigma, px, applied to the radiance image
   // Light.
   double light_distance_mm = 0;   // 0 = directional
   double light_intensity = 0;     // 0 = 1 (directional) or distance^2 (point: irradiance 1 at the center)
   bool true_directions = false;   // evaluate the BTF with per-point directions (default: nominal)
   // Sensor.
-  std::string format = "png16";   // "png16", "png8" or "exr"
+  std::string format = "png16";   // "png16", "png8", "jpeg" (8 bit) or "exr"
+  std::string transfer = "linear";  // integer encoding: "linear" or "srgb" (the sRGB curve, tagged in the file)
+  int jpeg_quality = 90;          // with format jpeg, 1..100
   double exposure = 0;            // 0 = auto: brightest pixel at 0.9 of full scale (1 for exr)
   double noise = 0;               // Gaussian read noise, SD as a fraction of full scale
   std::uint64_t seed = 1;         // noise seed

@@ -107,7 +107,17 @@ TEST(Detect, BadOptionsAndFamiliesAreUsageErrors) {
   o = {};
   o.quad_decimate = 0.5;
   EXPECT_THROW(o.Check(), Error);
-  EXPECT_EQ(TagFamilies().size(), 9u);
+  EXPECT_EQ(TagFamilies().size(), 9u + 21u);  // libapriltag's nine and OpenCV's 21 ArUco dictionaries
+  o = {};
+  o.border_bits = 3;
+  EXPECT_THROW(o.Check(), Error);
+  o = {};
+  o.family = "tagStandard41h12";
+  o.border_bits = 2;  // its data bits lie outside the border ring
+  EXPECT_THROW(o.Check(), Error);
+  o = {};
+  o.family = "aruco:DICT_9X9_1";
+  EXPECT_THROW(o.Check(), Error);
 }
 
 TEST(Detect, GrayIsLinearAndScaledToThe995thPercentile) {

@@ -4,51 +4,141 @@
 
 #include <fmt/format.h>
 
+#include <filesystem>
+#include <optional>
+
 #include "libbtf/core/atomic_file.h"
+#include "libbtf/register/calibrate.h"
 #include "libbtf/register/register.h"
 #include "tools/common/cli.h"
 
 namespace {
 
+// The board marker of a detection, or null (no board, or an id the board does not have).
+const btf::Marker* OnBoard(const btf::Board* board, int id) {
+  if (!board) return nullptr;
+  for (const auto& m : board->markers)
+    if (m.id == id) return &m;
+  return nullptr;
+}
+
 nlohmann::json DetectionsJson(const std::string& path, const std::vector<btf::TagDetection>& dets,
-                              const std::string& family) {
+                              const btf::TagDetectorOptions& options, const btf::Board* board) {
   nlohmann::json tags = nlohmann::json::array();
   for (const auto& d : dets) {
     nlohmann::json c = nlohmann::json::array();
     for (const auto& p : d.corners) c.push_back({p.x(), p.y()});
-    tags.push_back({{"id", d.id},
-                    {"hamming", d.hamming},
-                    {"decision_margin", d.decision_margin},
-                    {"center_px", {d.center.x(), d.center.y()}},
-                    {"corners_px", c}});
+    nlohmann::json t = {{"id", d.id},
+                        {"hamming", d.hamming},
+                        {"decision_margin", d.decision_margin},
+                        {"center_px", {d.center.x(), d.center.y()}},
+                        {"corners_px", c}};
+    if (board) {
+      const btf::Marker* m = OnBoard(board, d.id);
+      t["on_board"] = m != nullptr;
+      if (m) {
+        nlohmann::json b = nlohmann::json::array();
+        for (const auto& q : m->corners_mm) b.push_back({q.x(), q.y(), m->height_mm});
+        t["corners_board_mm"] = b;
+      }
+    }
+    tags.push_back(t);
   }
-  return {{"image", path},
-          {"family", family},
-          {"corner_order", "left-bottom, right-bottom, right-top, left-top of the upright tag"},
-          {"pixel_convention", "OpenCV: (0,0) is the center of the top-left pixel, y down"},
-          {"tags", tags}};
+  nlohmann::json j = {{"image", path},
+                      {"family", options.family},
+                      {"corner_order", "left-bottom, right-bottom, right-top, left-top of the upright tag"},
+                      {"pixel_convention", "OpenCV: (0,0) is the center of the top-left pixel, y down"},
+                      {"tags", tags}};
+  if (options.border_bits != 1) j["border_bits"] = options.border_bits;
+  if (board) j["board_frame"] = "plate mm: x right, y up, z = marker height above the material surface";
+  return j;
 }
+
+struct DetectFlags {
+  std::string image, board;
+  bool no_refine = false, no_split = false;
+  bool family_given = false;
+  btf::TagDetectorOptions options;
+  btf::ImageReadOptions input;
+  double input_gamma = 0;
+};
+
+// --input-gamma G implies --colorspace gamma.
+void ApplyGamma(btf::ImageReadOptions& input, double gamma) {
+  if (gamma > 0) input.colorspace = "gamma", input.gamma = gamma;
+}
+
+struct CalibrateFlags {
+  std::vector<std::string> inputs;
+  std::string board, output;
+  bool family_given = false;
+  double input_gamma = 0;
+  btf::CalibrateOptions options;
+};
 
 struct RunFlags {
   std::string manifest, output, report, sheet, family;
   bool allow_missing = false, no_intrinsics = false, no_radiometry = false, half = false;
+  double input_gamma = 0;
   btf::RegisterOptions options;
 };
 
-int RunDetect(const CLI::App& app, const btf::cli::CommonFlags& common, const std::string& image,
-              btf::TagDetectorOptions options, bool no_refine) {
-  options.refine_corners = !no_refine;
-  const auto dets = btf::DetectInImage(image, options);
+int RunDetect(const CLI::App& app, const btf::cli::CommonFlags& common, DetectFlags& f) {
+  btf::TagDetectorOptions& options = f.options;
+  options.refine_corners = !f.no_refine;
+  options.split_touching = !f.no_split;
+  ApplyGamma(f.input, f.input_gamma);
+  std::optional<btf::Board> board;
+  if (!f.board.empty()) {
+    board = btf::ReadBoard(f.board);
+    if (!f.family_given) options.family = board->family, options.border_bits = board->border_bits;
+  }
+  const auto dets = btf::DetectInImage(f.image, options, f.input);
+  const btf::Board* b = board ? &*board : nullptr;
   if (common.json) {
-    btf::cli::PrintJson(app, DetectionsJson(image, dets, options.family));
+    btf::cli::PrintJson(app, DetectionsJson(f.image, dets, options, b));
     return 0;
   }
-  fmt::print("{}: {} {} tag(s); corners px (OpenCV centers), order LB RB RT LT\n", image, dets.size(), options.family);
-  for (const auto& d : dets)
+  fmt::print("{}: {} {} tag(s); corners px (OpenCV centers), order LB RB RT LT{}\n", f.image, dets.size(),
+             options.family, b ? "; board mm (x, y, z) below each" : "");
+  for (const auto& d : dets) {
     fmt::print("  id {:4d}  hamming {}  margin {:6.1f}  ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) "
                "({:.2f}, {:.2f})\n",
                d.id, d.hamming, d.decision_margin, d.corners[0].x(), d.corners[0].y(), d.corners[1].x(),
                d.corners[1].y(), d.corners[2].x(), d.corners[2].y(), d.corners[3].x(), d.corners[3].y());
+    if (!b) continue;
+    if (const btf::Marker* m = OnBoard(b, d.id))
+      fmt::print("            board mm  ({:.3f}, {:.3f}, {:.3f}) ({:.3f}, {:.3f}, {:.3f}) ({:.3f}, {:.3f}, {:.3f}) "
+                 "({:.3f}, {:.3f}, {:.3f})\n",
+                 m->corners_mm[0].x(), m->corners_mm[0].y(), m->height_mm, m->corners_mm[1].x(), m->corners_mm[1].y(),
+                 m->height_mm, m->corners_mm[2].x(), m->corners_mm[2].y(), m->height_mm, m->corners_mm[3].x(),
+                 m->corners_mm[3].y(), m->height_mm);
+    else
+      fmt::print("            not on the board\n");
+  }
+  return 0;
+}
+
+int RunCalibrate(const CLI::App& app, const btf::cli::CommonFlags& common, CalibrateFlags& f) {
+  btf::CalibrateOptions& o = f.options;
+  o.family_override = f.family_given;
+  ApplyGamma(o.input, f.input_gamma);
+  o.Check();
+  const btf::Board board = btf::ReadBoard(f.board);
+  std::vector<std::filesystem::path> inputs(f.inputs.begin(), f.inputs.end());
+  const btf::CalibrateSummary sum = btf::CalibrateCamera(o, inputs, board, btf::cli::MakeReporter(common));
+  nlohmann::json views = nlohmann::json::array();
+  for (const auto& v : sum.views)
+    if (v.used) views.push_back({{"file", v.file}, {"rms_px", v.rms_px}, {"outlier", v.outlier}});
+  btf::WriteCameraFile(f.output, sum.camera, {{"board", f.board}, {"views", views}, {"outliers", sum.Outliers()}});
+  if (common.json) {
+    nlohmann::json j = sum.ToJson();
+    j["output"] = f.output;
+    btf::cli::PrintJson(app, j);
+  } else {
+    fmt::print("{}", sum.Report());
+    fmt::print("-> {}\n", f.output);
+  }
   return 0;
 }
 
@@ -57,6 +147,7 @@ int RunRegister(const CLI::App& app, const btf::cli::CommonFlags& common, RunFla
   ro.use_intrinsics = !f.no_intrinsics;
   ro.radiometry = !f.no_radiometry;
   if (!f.family.empty()) ro.detector.family = f.family, ro.family_override = true;
+  ApplyGamma(ro.input, f.input_gamma);
   if (f.half) ro.write.storage = btf::h5::Storage::kFloat16;
   ro.Check();
   // The dataset, report and contact sheet are all written under temporary names first and renamed
@@ -115,18 +206,44 @@ int main(int argc, char** argv) {
   btf::cli::CommonFlags common;
   btf::cli::AddCommonFlags(app, common);
 
+  const auto add_input_flags = [](CLI::App* c, btf::ImageReadOptions& in, double& gamma) {
+    c->add_option("--colorspace", in.colorspace,
+                  "Decoding of integer images: auto (file metadata) | linear | srgb | gamma");
+    c->add_option("--input-gamma", gamma, "Decode integer images as value^G (implies --colorspace gamma)");
+  };
+
   // detect
-  std::string d_image;
-  btf::TagDetectorOptions dopt;
-  bool no_refine = false;
-  auto* cd = app.add_subcommand("detect", "Detect AprilTag markers in one image and print ids and corners");
-  cd->add_option("IMAGE", d_image, "Image file (any format OpenImageIO reads)")->required();
-  cd->add_option("--family", dopt.family, "Tag family");
+  DetectFlags df;
+  btf::TagDetectorOptions& dopt = df.options;
+  auto* cd = app.add_subcommand("detect", "Detect AprilTag or ArUco markers in one image and print ids and corners");
+  cd->add_option("IMAGE", df.image, "Image file (any format OpenImageIO reads)")->required();
+  auto* fam = cd->add_option("--family", dopt.family, "Tag family: tag36h11, ... or aruco:DICT_5X5_100, ...");
+  auto* bb = cd->add_option("--border-bits", dopt.border_bits, "Black tag border width, modules (1 or 2)");
+  cd->add_option("--board", df.board, "Board file (ours, or a Kalibr aprilgrid .yaml): print board coordinates");
   cd->add_option("--max-hamming", dopt.max_hamming, "Drop detections correcting more bits");
   cd->add_option("--min-margin", dopt.min_decision_margin, "Drop detections with a lower decision margin");
   cd->add_option("--decimate", dopt.quad_decimate, "libapriltag quad_decimate");
   cd->add_flag("--apriltag-refine", dopt.refine_edges, "Use libapriltag's refine_edges (biased in 3.3.0)");
-  cd->add_flag("--no-refine", no_refine, "Skip our sub-pixel edge fit (raw libapriltag corners)");
+  cd->add_flag("--no-refine", df.no_refine, "Skip our sub-pixel edge fit (raw libapriltag corners)");
+  cd->add_flag("--no-split-touching", df.no_split,
+               "2-bit border: skip the second pass for tags touching an AprilGrid's corner squares");
+  add_input_flags(cd, df.input, df.input_gamma);
+
+  // calibrate
+  CalibrateFlags kf;
+  btf::CalibrateOptions& ko = kf.options;
+  auto* ck = app.add_subcommand("calibrate", "Camera intrinsics and distortion from photos of a board");
+  ck->add_option("IMAGES_OR_MANIFEST", kf.inputs, "Photos and/or manifest.json files (their cameras are ignored)")
+      ->required();
+  ck->add_option("--board", kf.board, "Board file: ours (.json) or a Kalibr aprilgrid (.yaml)")->required();
+  ck->add_option("-o,--output", kf.output, "Output camera.json")->required();
+  ck->add_option("--model", ko.model, "radtan (k1, k2, p1, p2, k3) | fisheye (k1..k4)");
+  auto* kfam = ck->add_option("--family", ko.detector.family, "Tag family (default: the board's)");
+  auto* kbb = ck->add_option("--border-bits", ko.detector.border_bits, "Black tag border, modules (default: the board's)");
+  ck->add_option("--min-markers", ko.min_markers, "Photos with fewer board markers are left out");
+  ck->add_option("--min-views", ko.min_views, "Fewer usable photos is an error");
+  ck->add_option("--outlier-factor", ko.outlier_factor, "Photos with RMS over this x the median are named outliers");
+  add_input_flags(ck, ko.input, kf.input_gamma);
 
   // run
   RunFlags rf;
@@ -145,6 +262,9 @@ int main(int argc, char** argv) {
   cr->add_flag("--allow-missing", rf.allow_missing, "Exit 0 even if some photos fail (they are still reported)");
   cr->add_option("--truth", ro.truth, "truth.json (btf-synth photos): add errors against the truth to the report");
   cr->add_option("--family", rf.family, "Tag family (default: the board's)");
+  cr->add_option("--border-bits", ro.detector.border_bits, "With --family: black tag border, modules");
+  cr->add_option("--camera", ro.camera, "camera.json (btf-register calibrate): replaces the manifest's intrinsics");
+  add_input_flags(cr, ro.input, rf.input_gamma);
   cr->add_flag("--no-intrinsics", rf.no_intrinsics, "Ignore the manifest's camera: one homography per photo");
   cr->add_flag("--no-radiometry", rf.no_radiometry, "Store pixel / exposure (units 'relative') instead of BRDF");
   cr->add_option("--samples-per-px", ro.rectify.samples_per_px, "Anti-aliasing: samples per photo pixel per axis");
@@ -156,7 +276,10 @@ int main(int argc, char** argv) {
   cr->add_flag("--half", rf.half, "Store float16 (default float32)");
 
   return btf::cli::Main(argc, argv, app, [&] {
-    if (*cd) return RunDetect(app, common, d_image, dopt, no_refine);
+    df.family_given = fam->count() > 0 || bb->count() > 0;
+    kf.family_given = kfam->count() > 0 || kbb->count() > 0;
+    if (*cd) return RunDetect(app, common, df);
+    if (*ck) return RunCalibrate(app, common, kf);
     return RunRegister(app, common, rf);
   });
 }

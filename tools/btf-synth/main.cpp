@@ -187,7 +187,18 @@ int main(int argc, char** argv) {
                  "Directional: irradiance at normal incidence; point: intensity (0 = 1 or distance^2)");
   cp->add_flag("--true-directions", po.true_directions,
                "Evaluate the BTF with per-point view/light directions (default: the photo's nominal ones)");
-  cp->add_option("--format", po.format, "png16 | png8 | exr (linear)");
+  cp->add_option("--format", po.format, "png16 | png8 | jpeg | exr");
+  cp->add_option("--transfer", po.transfer, "Integer encoding: linear | srgb (the sRGB curve, tagged in the file)");
+  cp->add_option("--jpeg-quality", po.jpeg_quality, "JPEG quality 1..100 (with --format jpeg)");
+  cp->add_option("--blur", po.blur_px, "Gaussian optical blur (PSF) sigma, px (0 = none)");
+  cp->add_option("--target", po.target, "ring (sample with 8 markers) | aprilgrid (Kalibr AprilGrid, no sample)");
+  cp->add_option("--family", po.family, "Tag family of the markers");
+  cp->add_option("--border-bits", po.border_bits, "Black tag border, modules (0 = 1 for ring, 2 for aprilgrid)");
+  cp->add_option("--grid-rows", po.grid_rows, "AprilGrid: tag rows");
+  cp->add_option("--grid-cols", po.grid_cols, "AprilGrid: tag columns");
+  cp->add_option("--grid-tag-mm", po.grid_tag_mm,
+                 "AprilGrid: tag side, mm (0 = grid spans 85% of the image at 0 deg with --focal, else 88)");
+  cp->add_option("--grid-spacing", po.grid_spacing, "AprilGrid: gap between tags / tag side");
   cp->add_option("--exposure", po.exposure, "Pixel value = exposure x radiance (0 = auto)");
   cp->add_option("--noise", po.noise, "Gaussian read noise SD, fraction of full scale");
   cp->add_option("--seed", po.seed, "Noise seed");

@@ -1,0 +1,247 @@
+#include "libbtf/register/calibrate.h"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core.hpp>
+
+#include "libbtf/core/error.h"
+
+namespace btf {
+namespace {
+
+struct Input {
+  std::filesystem::path path;
+  std::string name;        // as reported
+  std::string transfer;    // the manifest's, if any
+};
+
+std::vector<Input> ExpandInputs(const std::vector<std::filesystem::path>& inputs) {
+  std::vector<Input> out;
+  for (const auto& p : inputs) {
+    std::string ext = p.extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+    if (ext == ".json") {
+      const Manifest m = ReadManifest(p);  // its camera is ignored: that is what we estimate
+      for (const auto& e : m.photos) out.push_back({p.parent_path() / e.file, e.file, m.transfer});
+    } else {
+      out.push_back({p, p.string(), ""});
+    }
+  }
+  return out;
+}
+
+double Median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
+}
+
+}  // namespace
+
+void CalibrateOptions::Check() const {
+  BTF_CHECK_OPTION(model == "radtan" || model == "fisheye", "model", "radtan or fisheye");
+  detector.Check();
+  input.Check();
+  BTF_CHECK_OPTION(min_markers >= 1, "min-markers", ">= 1");
+  BTF_CHECK_OPTION(min_views >= 3, "min-views", ">= 3 (a planar board needs at least 3 views)");
+  BTF_CHECK_OPTION(std::isfinite(outlier_factor) && outlier_factor > 1, "outlier-factor", "> 1");
+}
+
+std::vector<std::string> CalibrateSummary::Outliers() const {
+  std::vector<std::string> out;
+  for (const auto& v : views)
+    if (v.outlier) out.push_back(v.file);
+  return out;
+}
+
+nlohmann::json CalibrateSummary::ToJson() const {
+  const CameraModel& c = camera.camera;
+  nlohmann::json cam = {{"model", camera.model}, {"image_size", {c.width, c.height}}, {"fx", c.fx}, {"fy", c.fy},
+                        {"cx", c.cx},         {"cy", c.cy}};
+  if (camera.model == "radtan") {
+    cam["k1"] = c.k1, cam["k2"] = c.k2, cam["p1"] = c.p1, cam["p2"] = c.p2, cam["k3"] = c.k3;
+  } else {
+    for (int i = 0; i < 4; ++i) cam[fmt::format("k{}", i + 1)] = camera.fisheye_k[i];
+  }
+  cam["rms_px"] = camera.rms_px;
+  nlohmann::json vs = nlohmann::json::array();
+  for (const auto& v : views) {
+    nlohmann::json j = {{"file", v.file}, {"used", v.used}, {"markers", v.markers}};
+    if (v.used) j["rms_px"] = v.rms_px, j["outlier"] = v.outlier;
+    if (!v.error.empty()) j["error"] = v.error;
+    vs.push_back(j);
+  }
+  return {{"camera", cam},         {"views_used", views_used}, {"corners_used", corners_used},
+          {"views", vs},           {"outliers", Outliers()},   {"seconds", times.ToJson()}};
+}
+
+std::string CalibrateSummary::Report() const {
+  const CameraModel& c = camera.camera;
+  std::string r = fmt::format("{} model, {} x {} px, {} of {} photos, {} corners: RMS {:.4f} px\n", camera.model,
+                              c.width, c.height, views_used, views.size(), corners_used, camera.rms_px);
+  r += fmt::format("fx {:.4f}  fy {:.4f}  cx {:.4f}  cy {:.4f}\n", c.fx, c.fy, c.cx, c.cy);
+  if (camera.model == "radtan")
+    r += fmt::format("k1 {:.6f}  k2 {:.6f}  p1 {:.6f}  p2 {:.6f}  k3 {:.6f}\n", c.k1, c.k2, c.p1, c.p2, c.k3);
+  else
+    r += fmt::format("k1 {:.6f}  k2 {:.6f}  k3 {:.6f}  k4 {:.6f}\n", camera.fisheye_k[0], camera.fisheye_k[1],
+                     camera.fisheye_k[2], camera.fisheye_k[3]);
+  for (const auto& v : views) {
+    if (v.used)
+      r += fmt::format("  {}: {} markers, RMS {:.4f} px{}\n", v.file, v.markers, v.rms_px, v.outlier ? "  OUTLIER" : "");
+    else
+      r += fmt::format("  {}: left out: {}\n", v.file, v.error);
+  }
+  const auto out = Outliers();
+  if (!out.empty()) {
+    std::string list;
+    for (const auto& f : out) list += (list.empty() ? "" : ", ") + f;
+    r += fmt::format("outlier photos (RMS over outlier_factor x the median): {}\n", list);
+  }
+  r += fmt::format("time: {}\n", times.Report());
+  return r;
+}
+
+CalibrateSummary CalibrateCamera(const CalibrateOptions& o, const std::vector<std::filesystem::path>& inputs,
+                                 const Board& board, const Reporter& reporter) {
+  o.Check();
+  if (inputs.empty()) ThrowUsage("calibrate: no images or manifests given");
+  TagDetectorOptions dopt = o.detector;
+  if (!o.family_override) dopt.family = board.family, dopt.border_bits = board.border_bits;
+  const TagDetector detector(dopt);
+  std::map<int, const Marker*> by_id;
+  for (const auto& m : board.markers) by_id[m.id] = &m;
+  // calibrateCamera's planar initialisation wants z = 0: markers all at one height are shifted there.
+  const double h0 = board.markers.front().height_mm;
+  for (const auto& m : board.markers)
+    if (m.height_mm != h0)
+      ThrowBadInput("calibrate: the board's markers lie at different heights ({} and {} mm): a planar board is needed",
+                    h0, m.height_mm);
+
+  CalibrateSummary sum;
+  Timer t;
+  const std::vector<Input> photos = ExpandInputs(inputs);
+  std::vector<std::vector<cv::Point3f>> object;
+  std::vector<std::vector<cv::Point2f>> image;
+  std::vector<int> view_of;  // index into sum.views
+  int width = 0, height = 0;
+  std::string size_from;
+  for (std::size_t i = 0; i < photos.size(); ++i) {
+    reporter.Progress(i, photos.size(), "detect");
+    CalibrationView v;
+    v.file = photos[i].name;
+    ImageReadOptions in = o.input;
+    if (in.colorspace == "auto" && !photos[i].transfer.empty()) in.colorspace = photos[i].transfer;
+    const Image im = ReadImage(photos[i].path, in);  // unreadable: the error names the file
+    if (width == 0) {
+      width = im.width, height = im.height, size_from = v.file;
+    } else if (im.width != width || im.height != height) {
+      ThrowBadInput("calibrate: '{}' is {} x {} px but '{}' is {} x {}: all photos must come from one camera setting",
+                    v.file, im.width, im.height, size_from, width, height);
+    }
+    std::vector<cv::Point3f> obj;
+    std::vector<cv::Point2f> img;
+    for (const auto& d : detector.Detect(im)) {
+      const auto it = by_id.find(d.id);
+      if (it == by_id.end()) continue;
+      ++v.markers;
+      for (int k = 0; k < 4; ++k) {
+        obj.emplace_back(static_cast<float>(it->second->corners_mm[k].x()), static_cast<float>(it->second->corners_mm[k].y()), 0.0f);
+        img.emplace_back(static_cast<float>(d.corners[k].x()), static_cast<float>(d.corners[k].y()));
+      }
+    }
+    if (v.markers < o.min_markers) {
+      v.error = fmt::format("{} board markers found, at least {} needed (min_markers)", v.markers, o.min_markers);
+    } else {
+      v.used = true;
+      object.push_back(std::move(obj));
+      image.push_back(std::move(img));
+      view_of.push_back(static_cast<int>(sum.views.size()));
+    }
+    sum.views.push_back(std::move(v));
+  }
+  reporter.Progress(photos.size(), photos.size(), "detect");
+  sum.times.Add("detect", t.Seconds());
+  if (static_cast<int>(object.size()) < o.min_views) {
+    std::string failed;
+    for (const auto& v : sum.views)
+      if (!v.used) failed += fmt::format("{}'{}': {}", failed.empty() ? "" : "; ", v.file, v.error);
+    ThrowBadInput("calibrate: {} usable photos of {}, at least {} needed (min_views){}{}", object.size(),
+                  sum.views.size(), o.min_views, failed.empty() ? "" : "; left out: ", failed);
+  }
+
+  t.Restart();
+  cv::Mat K, dist;
+  std::vector<cv::Mat> rvecs, tvecs;
+  const cv::Size size(width, height);
+  const cv::TermCriteria crit(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 200, 1e-12);
+  if (o.model == "radtan") {
+    sum.camera.rms_px = cv::calibrateCamera(object, image, size, K, dist, rvecs, tvecs, 0, crit);
+  } else {
+    std::vector<std::vector<cv::Point3d>> obj_d(object.size());
+    std::vector<std::vector<cv::Point2d>> img_d(image.size());
+    for (std::size_t i = 0; i < object.size(); ++i) {
+      for (const auto& p : object[i]) obj_d[i].emplace_back(p.x, p.y, p.z);
+      for (const auto& p : image[i]) img_d[i].emplace_back(p.x, p.y);
+    }
+    try {
+      // OpenCV's own start (f = max(w, h) / pi, no distortion) does not converge on such views:
+      // start from the pinhole intrinsics of a radtan fit.
+      cv::Mat K0, d0;
+      std::vector<cv::Mat> r0, t0;
+      cv::calibrateCamera(object, image, size, K0, d0, r0, t0, 0, crit);
+      K = K0.clone();
+      dist = cv::Mat::zeros(4, 1, CV_64F);
+      sum.camera.rms_px = cv::fisheye::calibrate(obj_d, img_d, size, K, dist, rvecs, tvecs,
+                                                 cv::fisheye::CALIB_RECOMPUTE_EXTRINSIC | cv::fisheye::CALIB_FIX_SKEW |
+                                                     cv::fisheye::CALIB_USE_INTRINSIC_GUESS,
+                                                 crit);
+    } catch (const cv::Exception& e) {
+      ThrowBadInput("calibrate: the fisheye fit failed ({}): too few or too similar views", e.err);
+    }
+  }
+  if (K.empty() || !std::isfinite(sum.camera.rms_px)) ThrowBadInput("calibrate: the fit failed (degenerate views)");
+  CameraModel& c = sum.camera.camera;
+  sum.camera.model = o.model;
+  c.width = width, c.height = height;
+  c.fx = K.at<double>(0, 0), c.fy = K.at<double>(1, 1), c.cx = K.at<double>(0, 2), c.cy = K.at<double>(1, 2);
+  const auto coef = [&](int i) { return i < static_cast<int>(dist.total()) ? dist.at<double>(i) : 0.0; };
+  if (o.model == "radtan") {
+    c.k1 = coef(0), c.k2 = coef(1), c.p1 = coef(2), c.p2 = coef(3), c.k3 = coef(4);
+  } else {
+    for (int i = 0; i < 4; ++i) sum.camera.fisheye_k[i] = coef(i);
+  }
+  // Per-photo reprojection RMS; outliers against the median.
+  std::vector<double> rms;
+  for (std::size_t i = 0; i < object.size(); ++i) {
+    std::vector<cv::Point2f> proj;
+    if (o.model == "radtan") {
+      cv::projectPoints(object[i], rvecs[i], tvecs[i], K, dist, proj);
+    } else {
+      std::vector<cv::Point3d> od;
+      for (const auto& p : object[i]) od.emplace_back(p.x, p.y, p.z);
+      std::vector<cv::Point2d> pd;
+      cv::fisheye::projectPoints(od, pd, rvecs[i], tvecs[i], K, dist);
+      for (const auto& p : pd) proj.emplace_back(static_cast<float>(p.x), static_cast<float>(p.y));
+    }
+    double ss = 0;
+    for (std::size_t k = 0; k < proj.size(); ++k) {
+      const double dx = proj[k].x - image[i][k].x, dy = proj[k].y - image[i][k].y;
+      ss += dx * dx + dy * dy;
+    }
+    rms.push_back(std::sqrt(ss / static_cast<double>(proj.size())));
+    sum.views[static_cast<std::size_t>(view_of[i])].rms_px = rms.back();
+    sum.corners_used += static_cast<int>(proj.size());
+  }
+  const double med = Median(rms);
+  for (std::size_t i = 0; i < rms.size(); ++i)
+    if (rms[i] > std::max(o.outlier_factor * med, 0.2)) sum.views[static_cast<std::size_t>(view_of[i])].outlier = true;
+  sum.views_used = static_cast<int>(object.size());
+  sum.times.Add("calibrate", t.Seconds());
+  for (const auto& f : sum.Outliers()) reporter.Warn("'{}': reprojection RMS over {} x the median: an outlier photo", f, o.outlier_factor);
+  return sum;
+}
+
+}  // namespace btf

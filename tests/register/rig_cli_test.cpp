@@ -1,0 +1,212 @@
+// Real-rig inputs end to end: Kalibr AprilGrid (2-bit border) photos from btf-synth in 8-bit sRGB
+// JPEG with blur and noise, ArUco markers, calibration errors and run --camera.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/aruco.hpp>
+#include <opencv2/aruco/charuco.hpp>
+#include <opencv2/calib3d.hpp>
+
+#include "libbtf/core/error.h"
+#include "libbtf/io/rig.h"
+#include "libbtf/register/calibrate.h"
+#include "libbtf/register/detect.h"
+#include "tests/test_util.h"
+
+namespace btf {
+namespace {
+
+using json = nlohmann::json;
+
+// Corner RMS of `detect --json` output against truth.json's corners of the same photo.
+double CornerRms(const json& det, const PhotoTruth& truth, int* found) {
+  double ss = 0;
+  int n = 0;
+  *found = 0;
+  for (const auto& t : det["tags"]) {
+    const auto it = truth.marker_corners_px.find(t["id"].get<int>());
+    if (it == truth.marker_corners_px.end()) continue;
+    ++*found;
+    for (int k = 0; k < 4; ++k) {
+      const Vec2 p(t["corners_px"][k][0].get<double>(), t["corners_px"][k][1].get<double>());
+      ss += (p - it->second[static_cast<std::size_t>(k)]).squaredNorm();
+      ++n;
+    }
+  }
+  return n ? std::sqrt(ss / n) : 1e9;
+}
+
+TEST(RigCli, AprilGridWithTwoBitBorderInSrgbJpegIsFoundWithBoardCoordinates) {
+  // 30 deg view of a 6 x 6 AprilGrid, 640 x 480, 8-bit sRGB JPEG quality 90, blur 0.7 px, noise
+  // 0.5 % of full scale, k1 = -0.05. Bound 0.08 px: modules are 5.4 px at 0 deg here and the
+  // photo's 3 x 3 samples per pixel quantise edges to 1/3 px (docs/btf-register.md, "Accuracy");
+  // the 0.05 px figure at 1024 x 768 with 8 x 8 samples is in rig_slow_test.cpp.
+  const auto dir = test::TempDir();
+  const std::string synth = test::Tool("btf-synth") +
+                            " photos --quiet --target aprilgrid --views 9 --lights 0 --width 640 --height 480 "
+                            "--focal 800 --camera-distance 300 --format jpeg --transfer srgb --jpeg-quality 90 "
+                            "--blur 0.7 --noise 0.005 --k1 -0.05 -o " + dir.string();
+  ASSERT_EQ(test::RunCommand(synth), 0) << synth;
+  const auto truth = ReadTruth(dir / "truth.json");
+  ASSERT_EQ(truth.size(), 1u);
+  ASSERT_EQ(truth[0].marker_corners_px.size(), 36u);
+  std::string out;
+  const std::string det = test::Tool("btf-register") + " detect --json " + (dir / truth[0].file).string() +
+                          " --board " + (dir / "board.json").string();
+  ASSERT_EQ(test::RunCommand(det, &out), 0) << det << out;
+  const json j = json::parse(out);
+  int found = 0;
+  const double rms = CornerRms(j, truth[0], &found);
+  std::printf("AprilGrid 30 deg, 640x480 JPEG: %d of 36 tags, corner RMS %.4f px\n", found, rms);
+  EXPECT_EQ(found, 36);
+  EXPECT_LT(rms, 0.08);
+  EXPECT_EQ(j["border_bits"], 2);
+  // Board coordinates: tag 7 (row 1, column 1), its bottom-left corner.
+  const Board board = ReadBoard(dir / "board.json");
+  for (const auto& t : j["tags"])
+    if (t["id"] == 7) {
+      EXPECT_TRUE(t["on_board"].get<bool>());
+      EXPECT_NEAR(t["corners_board_mm"][0][0].get<double>(), board.markers[7].corners_mm[0].x(), 1e-9);
+      EXPECT_NEAR(t["corners_board_mm"][0][1].get<double>(), board.markers[7].corners_mm[0].y(), 1e-9);
+    }
+  // With the default 1-bit border nothing decodes (the 0 of 36).
+  const std::string det1 = test::Tool("btf-register") + " detect --json --family tag36h11 " +
+                           (dir / truth[0].file).string();
+  ASSERT_EQ(test::RunCommand(det1, &out), 0) << det1 << out;
+  EXPECT_EQ(json::parse(out)["tags"].size(), 0u);
+}
+
+TEST(RigDetect, ArucoMarkersInOurCornerOrderAndPixelConvention) {
+  // A DICT_5X5_100 marker drawn by OpenCV, 10 px per module, placed at a known offset on white.
+  for (int border : {1, 2}) {
+    const auto dict = cv::aruco::getPredefinedDictionary(cv::aruco::DICT_5X5_100);
+    const int modules = 5 + 2 * border, side = 10 * modules;
+    cv::Mat marker;
+    dict->drawMarker(42, side, marker, border);
+    const int W = 400, H = 300, x0 = 137, y0 = 81;
+    Image im(W, H, 1);
+    for (auto& v : im.pixels) v = 0.8f;
+    for (int y = 0; y < side; ++y)
+      for (int x = 0; x < side; ++x) im.at(x0 + x, y0 + y, 0) = marker.at<unsigned char>(y, x) ? 0.8f : 0.05f;
+    TagDetectorOptions o;
+    o.family = "aruco:DICT_5X5_100";
+    o.border_bits = border;
+    const TagDetector det(o);
+    const auto d = det.Detect(im);
+    ASSERT_EQ(d.size(), 1u) << "border " << border;
+    EXPECT_EQ(d[0].id, 42);
+    // OpenCV convention: the square spans pixel edges x0 - 0.5 .. x0 + side - 0.5. Order LB, RB, RT, LT.
+    const Vec2 lb(x0 - 0.5, y0 + side - 0.5), rb(x0 + side - 0.5, y0 + side - 0.5), rt(x0 + side - 0.5, y0 - 0.5),
+        lt(x0 - 0.5, y0 - 0.5);
+    const std::array<Vec2, 4> want = {lb, rb, rt, lt};
+    for (int k = 0; k < 4; ++k)  // our edge fit on pixel-aligned edges: exact to 0.01 px
+      EXPECT_LT((d[0].corners[k] - want[k]).norm(), 0.01) << "border " << border << " corner " << k;
+  }
+}
+
+TEST(RigDetect, CharucoBoardMarkersMatchTheBoardFile) {
+  // OpenCV draws a 5 x 7 ChArUco board (DICT_5X5_100, 40 px squares, 30 px markers, 20 px margin);
+  // our detector finds its 17 markers and the homography from the board's corners (mm, from the
+  // YAML definition read by ReadBoard) to the detected corners fits all 68 to 0.02 px, which holds
+  // only with the right layout, ids, corner order and y direction.
+  const auto dir = test::TempDir();
+  std::ofstream(dir / "charuco.yaml") << "target_type: charuco\nsquaresX: 5\nsquaresY: 7\nsquareSize: 0.04\n"
+                                         "markerSize: 0.03\ndictionary: DICT_5X5_100\n";
+  const Board board = ReadBoard(dir / "charuco.yaml");
+  ASSERT_EQ(board.markers.size(), 17u);
+  EXPECT_EQ(board.family, "aruco:DICT_5X5_100");
+  const auto cb = cv::aruco::CharucoBoard::create(5, 7, 0.04f, 0.03f,
+                                                  cv::aruco::getPredefinedDictionary(cv::aruco::DICT_5X5_100));
+  cv::Mat drawn;
+  cb->draw(cv::Size(240, 320), drawn, 20, 1);
+  Image im(drawn.cols, drawn.rows, 1);
+  for (int y = 0; y < drawn.rows; ++y)
+    for (int x = 0; x < drawn.cols; ++x) im.at(x, y, 0) = drawn.at<unsigned char>(y, x) ? 0.8f : 0.05f;
+  TagDetectorOptions o;
+  o.family = board.family;
+  const auto dets = TagDetector(o).Detect(im);
+  EXPECT_EQ(dets.size(), 17u);
+  std::vector<cv::Point2f> mm, px;
+  for (const auto& d : dets)
+    for (const auto& m : board.markers)
+      if (m.id == d.id)
+        for (int k = 0; k < 4; ++k) {
+          mm.emplace_back(static_cast<float>(m.corners_mm[k].x()), static_cast<float>(m.corners_mm[k].y()));
+          px.emplace_back(static_cast<float>(d.corners[k].x()), static_cast<float>(d.corners[k].y()));
+        }
+  ASSERT_EQ(mm.size(), 68u);
+  const cv::Mat H = cv::findHomography(mm, px, 0);
+  ASSERT_FALSE(H.empty());
+  std::vector<cv::Point2f> proj;
+  cv::perspectiveTransform(mm, proj, H);
+  double ss = 0;
+  for (std::size_t i = 0; i < proj.size(); ++i) ss += std::pow(proj[i].x - px[i].x, 2) + std::pow(proj[i].y - px[i].y, 2);
+  const double rms = std::sqrt(ss / static_cast<double>(proj.size()));
+  std::printf("ChArUco 5x7: %zu markers, board-to-image homography RMS %.4f px\n", dets.size(), rms);
+  EXPECT_LT(rms, 0.02);
+  // Board y up: the image y of a marker with larger board y is smaller.
+  EXPECT_LT(H.at<double>(1, 1) / H.at<double>(2, 2), 0);
+}
+
+TEST(RigCli, CalibrateWithTooFewViewsNamesTheFilesAndField) {
+  const auto dir = test::TempDir();
+  const std::string synth = test::Tool("btf-synth") +
+                            " photos --quiet --target aprilgrid --views 0,1 --lights 0 --width 320 --height 240 "
+                            "--focal 250 --camera-distance 90 --pixel-samples 1 -o " + dir.string();
+  ASSERT_EQ(test::RunCommand(synth), 0) << synth;
+  std::string out;
+  const std::string cal = test::Tool("btf-register") + " calibrate " + (dir / "manifest.json").string() + " --board " +
+                          (dir / "board.json").string() + " -o " + (dir / "camera.json").string();
+  EXPECT_EQ(test::RunCommand(cal + " 2>&1", &out), 3) << out;
+  EXPECT_NE(out.find("2 usable photos of 2, at least 3 needed (min_views)"), std::string::npos) << out;
+  EXPECT_FALSE(std::filesystem::exists(dir / "camera.json"));
+  // run needs a sample region: a calibration target's manifest fails fast.
+  const std::string run = test::Tool("btf-register") + " run " + (dir / "manifest.json").string() + " -o " +
+                          (dir / "d.h5").string() + " 2>&1";
+  EXPECT_EQ(test::RunCommand(run, &out), 3) << out;
+  EXPECT_NE(out.find("sample_size_mm is 0"), std::string::npos) << out;
+  // A bad model is a usage error.
+  EXPECT_EQ(test::RunCommand(cal + " --model pinhole 2>&1", &out), 2) << out;
+  // A board file that does not parse: exit 3 naming the file.
+  std::ofstream(dir / "bad.yaml") << "target_type: aprilgrid\ntagRows: 6\n";
+  const std::string bad = test::Tool("btf-register") + " calibrate " + (dir / "manifest.json").string() +
+                          " --board " + (dir / "bad.yaml").string() + " -o " + (dir / "c.json").string() + " 2>&1";
+  EXPECT_EQ(test::RunCommand(bad, &out), 3) << out;
+  EXPECT_NE(out.find("bad.yaml"), std::string::npos) << out;
+  EXPECT_NE(out.find("missing required field 'tagCols'"), std::string::npos) << out;
+}
+
+TEST(RigCli, RunTakesTheCameraFromCameraJson) {
+  // Ring photos with k1 = -0.05: run with a camera.json holding the true intrinsics registers as
+  // with the manifest's; one with a wrong fx fails the reprojection bound or moves the pose.
+  const auto dir = test::TempDir();
+  const std::string synth = test::Tool("btf-synth") +
+                            " photos --quiet --views 0 --lights 0 --width 480 --height 360 --pixel-samples 1 "
+                            "--k1 -0.05 -o " + dir.string();
+  ASSERT_EQ(test::RunCommand(synth), 0) << synth;
+  const Manifest m = ReadManifest(dir / "manifest.json");
+  CameraFile cf;
+  cf.camera = m.photos[0].camera;
+  WriteCameraFile(dir / "camera.json", cf);
+  std::string out;
+  const std::string run = test::Tool("btf-register") + " run --quiet --json " + (dir / "manifest.json").string() +
+                          " --resolution 8 --truth " + (dir / "truth.json").string() + " --report " +
+                          (dir / "r.json").string() + " -o " + (dir / "d.h5").string();
+  ASSERT_EQ(test::RunCommand(run + " --camera " + (dir / "camera.json").string(), &out), 0) << out;
+  std::ifstream in(dir / "r.json");
+  const json r = json::parse(in);
+  EXPECT_LT(r["photos"][0]["truth_homography_rms_px"].get<double>(), 0.1);
+  cf.camera.fx *= 1.05, cf.camera.fy *= 1.05;
+  WriteCameraFile(dir / "wrong.json", cf);
+  ASSERT_EQ(test::RunCommand(run + " --allow-missing --camera " + (dir / "wrong.json").string(), &out), 0) << out;
+  std::ifstream in2(dir / "r.json");
+  const json r2 = json::parse(in2);
+  EXPECT_EQ(r2["photos"][0]["model"], "pose");
+  EXPECT_GT(r2["photos"][0]["reprojection_rms_px"].get<double>(), r["photos"][0]["reprojection_rms_px"].get<double>());
+}
+
+}  // namespace
+}  // namespace btf
