@@ -13,6 +13,9 @@ std::filesystem::path TempDir();
 // Runs a command line through the shell; returns the exit code, stdout in *out (if non-null).
 int RunCommand(const std::string& command, std::string* out = nullptr);
 
+// The whole content of a file ("" if it cannot be read).
+std::string Slurp(const std::filesystem::path& path);
+
 // Path of a built tool, e.g. Tool("btf-info").
 std::string Tool(const std::string& name);
 

@@ -10,26 +10,21 @@
 namespace btf {
 namespace {
 
-std::string Slurp(const std::filesystem::path& p) {
-  std::ifstream f(p);
-  return std::string(std::istreambuf_iterator<char>(f), {});
-}
-
 TEST(AtomicOutput, CommitReplacesAndAbandonKeepsTheOldFile) {
   const auto dir = test::TempDir();
   const auto path = dir / "out.json";
   WriteTextFileAtomic(path, "first");
-  EXPECT_EQ(Slurp(path), "first");
+  EXPECT_EQ(test::Slurp(path), "first");
   {
     AtomicOutput out(path);
     std::ofstream(out.temp_path()) << "half-writ";
     EXPECT_TRUE(std::filesystem::exists(out.temp_path()));
     EXPECT_EQ(out.temp_path().extension(), ".json");  // writers that pick a type by extension work
   }  // abandoned
-  EXPECT_EQ(Slurp(path), "first");
+  EXPECT_EQ(test::Slurp(path), "first");
   EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir), {}), 1);
   WriteTextFileAtomic(path, "second");
-  EXPECT_EQ(Slurp(path), "second");
+  EXPECT_EQ(test::Slurp(path), "second");
 }
 
 TEST(AtomicOutput, ReserveCreatesTheTemporaryUntilCommitOrAbandon) {
@@ -45,7 +40,7 @@ TEST(AtomicOutput, ReserveCreatesTheTemporaryUntilCommitOrAbandon) {
   out.Reserve();
   std::ofstream(out.temp_path()) << "codec";
   out.Commit();
-  EXPECT_EQ(Slurp(dir / "c.h5"), "codec");
+  EXPECT_EQ(test::Slurp(dir / "c.h5"), "codec");
   EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir), {}), 1);
 }
 

@@ -22,16 +22,11 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string Slurp(const fs::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  return std::string(std::istreambuf_iterator<char>(f), {});
-}
-
 // Every file under `dir` with its bytes: the state a faulted run must leave unchanged.
 std::map<std::string, std::string> Snapshot(const fs::path& dir) {
   std::map<std::string, std::string> files;
   for (const auto& e : fs::recursive_directory_iterator(dir))
-    files[fs::relative(e.path(), dir).string()] = e.is_regular_file() ? Slurp(e.path()) : "<dir>";
+    files[fs::relative(e.path(), dir).string()] = e.is_regular_file() ? test::Slurp(e.path()) : "<dir>";
   return files;
 }
 
@@ -42,7 +37,7 @@ struct Counts {
 
 Counts ReadCounts(const fs::path& p) {
   Counts c;
-  std::istringstream in(Slurp(p));
+  std::istringstream in(test::Slurp(p));
   std::string op;
   long n;
   while (in >> op >> n) {

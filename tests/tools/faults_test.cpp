@@ -23,11 +23,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string Slurp(const fs::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  return std::string(std::istreambuf_iterator<char>(f), {});
-}
-
 // Names of the temporaries AtomicOutput and AtomicDirectory leave in `dir` (none after a clean end).
 std::vector<std::string> Temporaries(const fs::path& dir) {
   std::vector<std::string> out;
@@ -83,8 +78,8 @@ TEST(Faults, ReadOnlyOutputFolderExitsFourAndKeepsTheOldOutput) {
     EXPECT_EQ(rc, 4) << cmd << "\n" << out;
     EXPECT_NE(out.find(mnt.string()), std::string::npos) << "the message names no folder: " << out;
   }
-  EXPECT_EQ(Slurp(mnt / "old.h5"), "old output");
-  EXPECT_EQ(Slurp(mnt / "photos" / "manifest.json"), "old output");
+  EXPECT_EQ(test::Slurp(mnt / "old.h5"), "old output");
+  EXPECT_EQ(test::Slurp(mnt / "photos" / "manifest.json"), "old output");
   EXPECT_TRUE(Temporaries(mnt).empty());
   ::umount(mnt.c_str());
 }
@@ -121,7 +116,7 @@ TEST(Faults, InputChangedWhileReadGivesTheOriginalResultOrAClearError) {
     for (long n : {1L, reads / 2, reads}) {
       fs::copy_file(pristine, input, fs::copy_options::overwrite_existing);
       fs::copy_file(other, dir / "replacement.h5", fs::copy_options::overwrite_existing);
-      const std::string old = Slurp(codec);
+      const std::string old = test::Slurp(codec);
       std::string log;
       const int rc = test::RunCommand(fmt::format("BTF_FAULT={}:{} BTF_FAULT_REPLACEMENT={} ", action, n,
                                                   (dir / "replacement.h5").string()) +
@@ -139,7 +134,7 @@ TEST(Faults, InputChangedWhileReadGivesTheOriginalResultOrAClearError) {
         EXPECT_TRUE(rc == 3 || rc == 4) << what;
         if (action != "truncate") EXPECT_EQ(rc, 4) << what;
         EXPECT_NE(log.find(input.string()), std::string::npos) << "the message names no file: " << what;
-        EXPECT_EQ(Slurp(codec), old) << what;
+        EXPECT_EQ(test::Slurp(codec), old) << what;
       }
       EXPECT_TRUE(Temporaries(out).empty()) << what;
     }

@@ -18,11 +18,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string Slurp(const fs::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  return std::string(std::istreambuf_iterator<char>(f), {});
-}
-
 bool HasTemporary(const fs::path& dir) {
   for (const auto& e : fs::directory_iterator(dir))
     if (e.path().filename().string().find(".tmp-") != std::string::npos) return true;
@@ -70,14 +65,14 @@ TEST(Interrupt, KilledSynthesisRemovesItsTemporaryAndKeepsTheOldOutput) {
   const fs::path dir = test::TempDir();
   const fs::path out = dir / "gt.h5";
   WriteDataset(out, test::MakeTestDataset(1, 1, 2, 2));
-  const std::string before = Slurp(out);
+  const std::string before = test::Slurp(out);
   for (int sig : {SIGTERM, SIGINT}) {
     const pid_t pid = Spawn({test::Tool("btf-synth"), "btf", "--model", "irawan2006", "--preset", "twill",
                              "--directions", "bonn81", "--resolution", "96", "--quiet", "-o", out.string()});
     ASSERT_TRUE(WaitUntil(pid, [&] { return HasTemporary(dir); }, 60)) << "no temporary appeared";
     EXPECT_EQ(KillAndWait(pid, sig), sig);
     EXPECT_FALSE(HasTemporary(dir)) << "signal " << sig;
-    EXPECT_EQ(Slurp(out), before) << "signal " << sig;
+    EXPECT_EQ(test::Slurp(out), before) << "signal " << sig;
   }
 }
 
@@ -88,7 +83,7 @@ TEST(Interrupt, KilledCompressionLeavesTheExistingCodecUntouched) {
   ASSERT_EQ(test::RunCommand(test::Tool("btf-compress") + " " + data.string() +
                              " --method pca-view --components 2 --quiet -o " + out.string()),
             0);
-  const std::string before = Slurp(out);
+  const std::string before = test::Slurp(out);
   const pid_t pid = Spawn({test::Tool("btf-compress"), data.string(), "--method", "lpca", "--clusters", "16",
                            "--components", "8", "--quiet", "-o", out.string()});
   // btf-compress reserves its temporary before the work; once it is there, let the run get into
@@ -100,7 +95,7 @@ TEST(Interrupt, KilledCompressionLeavesTheExistingCodecUntouched) {
   ASSERT_TRUE(HasTemporary(dir));
   EXPECT_EQ(KillAndWait(pid, SIGTERM), SIGTERM);
   EXPECT_FALSE(HasTemporary(dir));
-  EXPECT_EQ(Slurp(out), before);
+  EXPECT_EQ(test::Slurp(out), before);
 }
 
 }  // namespace
