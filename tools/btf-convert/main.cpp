@@ -1,0 +1,42 @@
+// btf-convert INPUT -o OUTPUT [--to dataset|bdi]: any readable BTF (libbtf dataset or codec, Bonn
+// .btf) to a libbtf dataset or a Bonn BDI file, one view slot at a time (docs/btf-convert.md).
+#include "libbtf/compress/codec_source.h"
+#include "libbtf/core/atomic_file.h"
+#include "libbtf/io/convert.h"
+#include "tools/common/cli.h"
+
+namespace {
+
+struct ConvertFlags {
+  std::string input, output;
+  btf::ConvertOptions options;
+};
+
+int RunConvert(const CLI::App& app, const btf::cli::CommonFlags& common, const ConvertFlags& f) {
+  // Options and the output format are checked before the input is read.
+  btf::ConvertTarget(f.options, f.output);
+  const auto input = btf::OpenSource(f.input);
+  const btf::ConvertSummary s = btf::Convert(f.options, *input, f.output, btf::cli::MakeReporter(common));
+  btf::cli::PrintSummary(app, common, s);
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"Convert a BTF between formats: libbtf dataset or codec, or Bonn .btf (BDI, DFMF, FMF, PVF) in; libbtf "
+               "dataset or Bonn BDI out. Reads and writes one view slot at a time.",
+               "btf-convert"};
+  btf::cli::Configure(app);
+  btf::cli::CommonFlags common;
+  ConvertFlags f;
+  btf::ConvertOptions& o = f.options;
+  app.add_option("INPUT", f.input, "Input: dataset (.h5), codec (.h5) or Bonn .btf file")->required();
+  app.add_option("-o,--output", f.output, "Output file (.h5 = dataset, .btf = BDI unless --to)")->required();
+  app.add_option("--to", o.to, "Output format: dataset | bdi (default: from the output's extension)");
+  app.add_option("--storage", o.storage, "Dataset output: float32 | float16");
+  app.add_option("--deflate-level", o.deflate_level, "Dataset output: deflate level 0-9 (0 = none)");
+  app.add_option("--scan-lines", o.scan_lines_per_chunk, "BDI output: texture rows per chunk");
+  btf::cli::AddCommonFlags(app, common);
+  return btf::cli::Main(argc, argv, app, [&] { return RunConvert(app, common, f); });
+}
