@@ -14,7 +14,6 @@
 
 #include "libbtf/core/atomic_file.h"
 #include "libbtf/core/error.h"
-#include "libbtf/core/version.h"
 #include "libbtf/io/dataset_stats.h"
 #include "libbtf/io/half.h"
 
@@ -366,7 +365,6 @@ void BonnReader::Impl::ReadMeta(Cursor& c) {
     h.xml = TrimNul(c.Chars(xml_size, "XML text"));
   }
   if (h.meta_version > 3) {
-    const std::uint64_t at = c.pos();
     const std::uint32_t n = c.Count("num_channels", 1, 1024);
     h.channel_names.clear();
     for (std::uint32_t i = 0; i < n; ++i) {
@@ -376,7 +374,6 @@ void BonnReader::Impl::ReadMeta(Cursor& c) {
       if (name.empty()) name = fmt::format("C{}", i);
       h.channel_names.push_back(name);
     }
-    (void)at;
   }
   if (c.pos() != start + size)
     c.Fail(start, "meta block struct_size",
@@ -463,7 +460,6 @@ void BonnReader::Impl::ReadDfmf(Cursor& c) {
   const std::uint64_t texels = std::uint64_t(h.width) * h.height;
   for (int ch = 0; ch < h.channels(); ++ch) {
     const int ss = ScalarSize(c, fmt::format("channel {} scalar_size", ch));
-    const std::uint64_t k_at = c.pos();
     const std::uint32_t k = c.Count(fmt::format("channel {} num_components", ch), 0, 1u << 20);
     const std::uint64_t rows_at = c.pos();
     const std::uint32_t rows = c.U32(fmt::format("channel {} rows", ch));
@@ -480,7 +476,6 @@ void BonnReader::Impl::ReadDfmf(Cursor& c) {
     if (ch > 0 && transposed != h.transposed)
       c.Fail(rows_at, fmt::format("channel {} rows x cols", ch), "uses a different layout than channel 0");
     h.transposed = transposed;
-    (void)k_at;
     c.Skip(double(k) * ss, fmt::format("channel {} singular values", ch));
     MatrixRef u = Locate(c, rows, int(k), int(k), ss, fmt::format("channel {} U", ch));
     MatrixRef v = Locate(c, cols, int(k), int(k), ss, fmt::format("channel {} SxV", ch));
@@ -634,7 +629,6 @@ void BonnReader::Impl::DecodeSlot(int view, float* out) const {
   const std::size_t texels = std::size_t(h.width) * h.height;
   switch (h.format) {
     case BonnFormat::kDfmf: {
-      std::vector<float> plane;
       for (int ch = 0; ch < nc; ++ch) {
         const RowMatrix& a = abrdf[std::size_t(ch)];
         const RowMatrix& t = texture[std::size_t(ch)];
