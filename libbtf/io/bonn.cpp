@@ -411,9 +411,10 @@ void BonnReader::Impl::ReadSampling(Cursor& c) {
     if (v == 0) {
       first_lights = list;
       for (std::size_t i = 0; i < nl; ++i) lights.push_back(DirectionFromAngles(list[2 * i], list[2 * i + 1]));
-    } else if (std::memcmp(list.data(), first_lights.data(), list.size() * 4) != 0) {
+    } else if (list != first_lights) {
+      // Compared as values (0 equals -0), all finite: a difference exists at some i < size.
       std::size_t i = 0;
-      while (list[i] == first_lights[i]) ++i;
+      while (i + 1 < list.size() && list[i] == first_lights[i]) ++i;
       c.Fail(list_at + 4 * i, fmt::format("view {} light {} {}", v, i / 2, i % 2 ? "phi" : "theta"),
              fmt::format("is {} but view 0 has {}: libbtf reads tensor-product samplings only (the same light list "
                          "for every view)",

@@ -585,5 +585,30 @@ TEST(BonnBadInput, SignaturesSizesAndValues) {
   }
 }
 
+TEST(BonnBadInput, LightListsDifferingOnlyInTheSignOfZeroAreEqual) {
+  // Found by fuzz_bonn_pvf: 0 and -0 differ bitwise but are the same direction.
+  Layout L;
+  L.views = 2;
+  L.lights = 1;
+  L.width = L.height = 1;
+  Bytes s = test::SamplingBlock(L);
+  const float zero = 0.0f, minus_zero = -0.0f;
+  std::memcpy(s.b.data() + 4 + 8 + 4, &zero, 4);            // view 0, light 0 theta
+  std::memcpy(s.b.data() + 4 + 20 + 8 + 4, &minus_zero, 4);  // view 1, light 0 theta
+  Bytes f;
+  f.Text("!FMF06FC").Append(test::Meta(L)).Append(s).U32(1).U32(1);
+  f.U32(1).U8(4).U32(1).U32(3 * 2).U32(1).F32(1);
+  for (int i = 0; i < 6 + 1; ++i) f.F32(0.5f);
+  const auto path = test::TempDir() / "z.btf";
+  f.Save(path);
+  const Dataset d = ReadBonn(path);
+  EXPECT_EQ(d.at(1, 0, 0, 0, 2), 0.25f);
+  // A real difference is still refused, naming the entry.
+  const float other = 0.5f;
+  std::memcpy(f.b.data() + 8 + test::Meta(L).size() + 4 + 20 + 8 + 4, &other, 4);
+  f.Save(path);
+  ExpectBadInput([&] { (void)BonnReader(path); }, {"view 1 light 0 theta", "is 0.5 but view 0 has 0"});
+}
+
 }  // namespace
 }  // namespace btf
