@@ -460,7 +460,7 @@ TEST(BonnBdi, FullAndSparseMaskWithShortLastChunk) {
   for (int i : {1, 7, 8, 14}) mask[std::size_t(i)] = 0;
   for (std::uint8_t compression : {std::uint8_t(0), std::uint8_t(2)}) {
     for (int scan_lines : {1, 2, 4}) {
-      const auto path = dir / ("b" + std::to_string(compression) + std::to_string(scan_lines) + ".btf");
+      const auto path = dir / fmt::format("b{}{}.btf", compression, scan_lines);
       Bdi(L, compression, mask, scan_lines).Save(path);
       EXPECT_EQ(FileFormatOf(path), "bonn-bdi");
       ExpectBdi(ReadBonn(path), L, compression, mask);
@@ -493,7 +493,8 @@ TEST(BonnBdi, DatasetToBdiToDatasetEqualsTheHalfRoundedInput) {
   WriteDataset(dir / "f16.h5", d, o);
   const Dataset f16 = ReadDataset(dir / "f16.h5");
   for (std::size_t i = 0; i < d.size(); ++i) {
-    if (std::abs(d.data()[i]) >= std::ldexp(1.0f, -14)) ASSERT_EQ(f16.data()[i], r.data()[i]) << i;
+    if (std::abs(d.data()[i]) < std::ldexp(1.0f, -14)) continue;
+    ASSERT_EQ(f16.data()[i], r.data()[i]) << i;
   }
 }
 
