@@ -886,6 +886,42 @@ void WriteAllAt(int fd, const char* p, std::size_t n, std::uint64_t offset, cons
 
 }  // namespace
 
+std::string EncodeBonnMetaAndSampling(const Sampling& views, const Sampling& lights, const DatasetInfo& info,
+                                      const std::string& measurement_setup) {
+  if (measurement_setup.size() >= 80) ThrowUsage("measurement_setup '{}' must be shorter than 80 bytes", measurement_setup);
+  ByteWriter meta;
+  meta.Put<std::uint32_t>(0);  // struct_size, patched below
+  meta.Put<std::uint32_t>(4);
+  meta.Chars(measurement_setup, 80);
+  meta.Chars("", 80);
+  meta.Chars("", 80);
+  meta.Put<float>(info.texel_size_mm > 0 ? float(1.0 / info.texel_size_mm) : 0.0f);
+  for (int i = 0; i < 3; ++i) meta.Put<float>(1.0f);
+  meta.Put<std::uint32_t>(info.cos_theta_i_included ? 1 : 0);
+  meta.Put<std::uint32_t>(0);  // no XML
+  meta.Put<std::uint32_t>(std::uint32_t(info.channel_names.size()));
+  for (const auto& name : info.channel_names) {
+    meta.Put<std::uint32_t>(std::uint32_t(name.size()));
+    meta.Chars(name, name.size());
+  }
+  const auto meta_size = std::uint32_t(meta.bytes.size());
+  std::memcpy(meta.bytes.data(), &meta_size, 4);
+  ByteWriter& b = meta;
+  b.Put<std::uint32_t>(std::uint32_t(views.size()));
+  for (int v = 0; v < views.size(); ++v) {
+    const Angles a = views.angles(v);
+    b.Put<float>(float(a.theta));
+    b.Put<float>(float(a.phi));
+    b.Put<std::uint32_t>(std::uint32_t(lights.size()));
+    for (int l = 0; l < lights.size(); ++l) {
+      const Angles al = lights.angles(l);
+      b.Put<float>(float(al.theta));
+      b.Put<float>(float(al.phi));
+    }
+  }
+  return std::string(b.bytes.begin(), b.bytes.end());
+}
+
 std::uint64_t WriteBdi(const std::filesystem::path& path, const SlotSource& source, const BdiWriteOptions& options,
                        const Reporter& reporter) {
   options.Check();
@@ -896,38 +932,8 @@ std::uint64_t WriteBdi(const std::filesystem::path& path, const SlotSource& sour
     ThrowBadInput("'{}' has {} channels but {} channel names", source.name(), nc, info.channel_names.size());
   ByteWriter b;
   b.Chars("!BDIF06R2!", 10);
-  // Meta block, version 4.
-  ByteWriter meta;
-  meta.Put<std::uint32_t>(0);  // struct_size, patched below
-  meta.Put<std::uint32_t>(4);
-  meta.Chars(options.measurement_setup, 80);
-  meta.Chars("", 80);
-  meta.Chars("", 80);
-  meta.Put<float>(info.texel_size_mm > 0 ? float(1.0 / info.texel_size_mm) : 0.0f);
-  for (int i = 0; i < 3; ++i) meta.Put<float>(1.0f);
-  meta.Put<std::uint32_t>(info.cos_theta_i_included ? 1 : 0);
-  meta.Put<std::uint32_t>(0);  // no XML
-  meta.Put<std::uint32_t>(std::uint32_t(nc));
-  for (const auto& name : info.channel_names) {
-    meta.Put<std::uint32_t>(std::uint32_t(name.size()));
-    meta.Chars(name, name.size());
-  }
-  const auto meta_size = std::uint32_t(meta.bytes.size());
-  std::memcpy(meta.bytes.data(), &meta_size, 4);
-  b.bytes.insert(b.bytes.end(), meta.bytes.begin(), meta.bytes.end());
-  // Sampling: every view repeats the light list.
-  b.Put<std::uint32_t>(std::uint32_t(nv));
-  for (int v = 0; v < nv; ++v) {
-    const Angles a = source.views().angles(v);
-    b.Put<float>(float(a.theta));
-    b.Put<float>(float(a.phi));
-    b.Put<std::uint32_t>(std::uint32_t(nl));
-    for (int l = 0; l < nl; ++l) {
-      const Angles al = source.lights().angles(l);
-      b.Put<float>(float(al.theta));
-      b.Put<float>(float(al.phi));
-    }
-  }
+  const std::string head = EncodeBonnMetaAndSampling(source.views(), source.lights(), info, options.measurement_setup);
+  b.bytes.insert(b.bytes.end(), head.begin(), head.end());
   b.Put<std::uint32_t>(std::uint32_t(w));
   b.Put<std::uint32_t>(std::uint32_t(h));
   b.Put<std::uint32_t>(std::uint32_t(options.scan_lines_per_chunk));

@@ -113,6 +113,13 @@ std::unique_ptr<SlotSource> OpenBonnSource(const std::filesystem::path& path);
 // conventions and meta data; with_stats scans every decoded value (one view slot at a time).
 nlohmann::json DescribeBonnFile(const std::filesystem::path& path, bool with_stats, const Reporter& reporter = {});
 
+// The bytes libbtf's writers put right after a signature: the meta block (version 4:
+// measurement_setup, empty sensor and light source, ppmm = 1/texel_size_mm or 0,
+// rgb_scale_factor 1, cosine_flag = cos_theta_i_included, no XML, the channel names) and the
+// sampling block (every view repeating the light list; float32 radians).
+std::string EncodeBonnMetaAndSampling(const Sampling& views, const Sampling& lights, const DatasetInfo& info,
+                                      const std::string& measurement_setup);
+
 // Writes `source` as a BDI file (`!BDIF06R2!`, meta version 4, half data, sparse flag with a
 // full mask so that btflib reads it, no rotations), one view slot at a time. Values must be
 // finite and within the half range (|x| <= 65504), else btf::Error (bad input) naming the item.

@@ -16,8 +16,9 @@
 namespace btf {
 
 struct ConvertOptions {
-  // Output format: "dataset" (libbtf-dataset, .h5) or "bdi" (Bonn BDI, .btf); "" = from the
-  // output's extension (.h5 -> dataset, .btf -> bdi). "dfmf", "fmf" and "pvf" are not written yet.
+  // Output format: "dataset" (libbtf-dataset, .h5), "bdi" (Bonn BDI, .btf) or "pvf" (Bonn PVF,
+  // from a pca-view codec only: compress/bonn_pvf.h); "" = from the output's extension
+  // (.h5 -> dataset, .btf -> bdi). "dfmf" and "fmf" are not written yet.
   std::string to;
   // Dataset output: "float32" or "float16" storage, deflate level 0-9.
   std::string storage = "float32";
@@ -41,7 +42,8 @@ struct ConvertSummary {
   std::string Report() const;
 };
 
-// Writes `input` to `output` (atomically: nothing appears under `output` on failure).
+// Writes `input` to `output` (atomically: nothing appears under `output` on failure). For "pvf"
+// it throws btf::Error (usage): PVF is written from a codec (WritePvf).
 ConvertSummary Convert(const ConvertOptions& options, const SlotSource& input, const std::filesystem::path& output,
                        const Reporter& reporter = {});
 

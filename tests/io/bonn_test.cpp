@@ -508,6 +508,36 @@ TEST(BonnBdi, WriterRefusesValuesBeyondHalfAndWritesNothing) {
   EXPECT_TRUE(std::filesystem::is_empty(dir));
 }
 
+TEST(BonnConvert, OptionsAndTargets) {
+  ConvertOptions o;
+  EXPECT_EQ(ConvertTarget(o, "x.h5"), "dataset");
+  EXPECT_EQ(ConvertTarget(o, "x.btf"), "bdi");
+  o.to = "dataset";
+  EXPECT_EQ(ConvertTarget(o, "x.btf"), "dataset");
+  const auto usage = [](const ConvertOptions& opt, const char* out) {
+    try {
+      ConvertTarget(opt, out);
+      ADD_FAILURE() << out;
+    } catch (const Error& e) {
+      EXPECT_EQ(e.code(), ExitCode::kUsage) << e.what();
+    }
+  };
+  usage(ConvertOptions(), "x.txt");
+  o.to = "fmf";
+  usage(o, "x.btf");
+  o.to = "pvf";  // a valid target, written from codecs only (compress/bonn_pvf.h)
+  EXPECT_EQ(ConvertTarget(o, "x.btf"), "pvf");
+  o = ConvertOptions();
+  o.storage = "float8";
+  usage(o, "x.h5");
+  o = ConvertOptions();
+  o.deflate_level = 10;
+  usage(o, "x.h5");
+  o = ConvertOptions();
+  o.scan_lines_per_chunk = 0;
+  usage(o, "x.btf");
+}
+
 // ---- bad input ----
 
 TEST(BonnBadInput, EveryTruncationIsRefusedNamingTheFile) {

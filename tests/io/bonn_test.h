@@ -15,8 +15,9 @@ class Bytes {
  public:
   template <typename T>
   Bytes& Put(T v) {
-    const auto* p = reinterpret_cast<const char*>(&v);
-    b.insert(b.end(), p, p + sizeof v);
+    const std::size_t at = b.size();
+    b.resize(at + sizeof v);
+    std::memcpy(b.data() + at, &v, sizeof v);
     return *this;
   }
   Bytes& U8(std::uint8_t v) { return Put(v); }

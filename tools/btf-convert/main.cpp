@@ -1,5 +1,6 @@
-// btf-convert INPUT -o OUTPUT [--to dataset|bdi]: any readable BTF (libbtf dataset or codec, Bonn
+// btf-convert INPUT -o OUTPUT [--to dataset|bdi|pvf]: any readable BTF (libbtf dataset or codec, Bonn
 // .btf) to a libbtf dataset or a Bonn BDI file, one view slot at a time (docs/btf-convert.md).
+#include "libbtf/compress/bonn_pvf.h"
 #include "libbtf/compress/codec_source.h"
 #include "libbtf/core/atomic_file.h"
 #include "libbtf/io/convert.h"
@@ -14,7 +15,12 @@ struct ConvertFlags {
 
 int RunConvert(const CLI::App& app, const btf::cli::CommonFlags& common, const ConvertFlags& f) {
   // Options and the output format are checked before the input is read.
-  btf::ConvertTarget(f.options, f.output);
+  if (btf::ConvertTarget(f.options, f.output) == "pvf") {
+    // PVF stores a per-view PCA: written from a pca-view codec's factors, not re-factorised.
+    const btf::Codec codec = btf::ReadCodec(f.input);
+    btf::cli::PrintSummary(app, common, btf::WritePvf(codec, f.input, f.output, btf::cli::MakeReporter(common)));
+    return 0;
+  }
   const auto input = btf::OpenSource(f.input);
   const btf::ConvertSummary s = btf::Convert(f.options, *input, f.output, btf::cli::MakeReporter(common));
   btf::cli::PrintSummary(app, common, s);
@@ -33,7 +39,7 @@ int main(int argc, char** argv) {
   btf::ConvertOptions& o = f.options;
   app.add_option("INPUT", f.input, "Input: dataset (.h5), codec (.h5) or Bonn .btf file")->required();
   app.add_option("-o,--output", f.output, "Output file (.h5 = dataset, .btf = BDI unless --to)")->required();
-  app.add_option("--to", o.to, "Output format: dataset | bdi (default: from the output's extension)");
+  app.add_option("--to", o.to, "Output format: dataset | bdi | pvf (pvf from a pca-view codec; default: from the output's extension)");
   app.add_option("--storage", o.storage, "Dataset output: float32 | float16");
   app.add_option("--deflate-level", o.deflate_level, "Dataset output: deflate level 0-9 (0 = none)");
   app.add_option("--scan-lines", o.scan_lines_per_chunk, "BDI output: texture rows per chunk");
