@@ -31,8 +31,6 @@ std::string ConvertTarget(const ConvertOptions& options, const std::filesystem::
       ThrowUsage("cannot tell the output format from '{}': name it .h5 (dataset) or .btf (bdi), or give --to",
                  output.string());
   }
-  if (to == "dfmf" || to == "fmf")
-    ThrowUsage("writing {} is not implemented yet; libbtf writes dataset, bdi and (from a pca-view codec) pvf", to);
   return to;
 }
 
@@ -55,6 +53,8 @@ std::string ConvertSummary::Report() const {
 ConvertSummary Convert(const ConvertOptions& options, const SlotSource& input, const std::filesystem::path& output,
                        const Reporter& reporter) {
   const std::string target = ConvertTarget(options, output);
+  if (target == "fmf" || target == "dfmf")
+    ThrowUsage("{} is written by WriteFmf (libbtf/compress/bonn_fmf.h), not by Convert", target);
   if (target == "pvf")
     ThrowUsage("PVF is written from a pca-view codec file ('{}' is a {}): btf-convert CODEC -o OUT.btf --to pvf",
                input.name(), input.kind());

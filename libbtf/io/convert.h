@@ -16,9 +16,9 @@
 namespace btf {
 
 struct ConvertOptions {
-  // Output format: "dataset" (libbtf-dataset, .h5), "bdi" (Bonn BDI, .btf) or "pvf" (Bonn PVF,
-  // from a pca-view codec only: compress/bonn_pvf.h); "" = from the output's extension
-  // (.h5 -> dataset, .btf -> bdi). "dfmf" and "fmf" are not written yet.
+  // Output format: "dataset" (libbtf-dataset, .h5), "bdi" (Bonn BDI, .btf), "fmf" / "dfmf" (Bonn
+  // factorisations: compress/bonn_fmf.h) or "pvf" (Bonn PVF, from a pca-view codec only:
+  // compress/bonn_pvf.h); "" = from the output's extension (.h5 -> dataset, .btf -> bdi).
   std::string to;
   // Dataset output: "float32" or "float16" storage, deflate level 0-9.
   std::string storage = "float32";
@@ -42,8 +42,9 @@ struct ConvertSummary {
   std::string Report() const;
 };
 
-// Writes `input` to `output` (atomically: nothing appears under `output` on failure). For "pvf"
-// it throws btf::Error (usage): PVF is written from a codec (WritePvf).
+// Writes `input` to `output` (atomically: nothing appears under `output` on failure) as a dataset
+// or BDI. For "fmf", "dfmf" and "pvf" it throws btf::Error (usage): those are written by WriteFmf
+// and WritePvf (libbtf/compress), which btf-convert calls.
 ConvertSummary Convert(const ConvertOptions& options, const SlotSource& input, const std::filesystem::path& output,
                        const Reporter& reporter = {});
 

@@ -523,10 +523,12 @@ TEST(BonnConvert, OptionsAndTargets) {
     }
   };
   usage(ConvertOptions(), "x.txt");
-  o.to = "fmf";
+  o.to = "svd";
   usage(o, "x.btf");
-  o.to = "pvf";  // a valid target, written from codecs only (compress/bonn_pvf.h)
-  EXPECT_EQ(ConvertTarget(o, "x.btf"), "pvf");
+  for (const char* to : {"fmf", "dfmf", "pvf"}) {  // valid targets, written by libbtf/compress
+    o.to = to;
+    EXPECT_EQ(ConvertTarget(o, "x.btf"), to);
+  }
   o = ConvertOptions();
   o.storage = "float8";
   usage(o, "x.h5");

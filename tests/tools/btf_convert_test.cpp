@@ -48,6 +48,12 @@ TEST(BtfConvert, DatasetToBdiThroughInfoCompressEvalAndBack) {
             0);
   ASSERT_EQ(test::RunCommand(test::Tool("btf-eval") + " compare " + d + "a.btf " + d + "c.h5 --json --quiet", &out), 0);
   EXPECT_TRUE(nlohmann::json::parse(out).contains("seconds"));
+  // DFMF with every component (12 per YUV channel): compared with the input by btf-eval.
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-convert") + " " + d + "a.btf -o " + d + "d.btf --to dfmf -c 100 --quiet >/dev/null"), 0);
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-eval") + " compare " + d + "a.btf " + d + "d.btf --json --quiet", &out), 0);
+  j = nlohmann::json::parse(out);
+  ASSERT_TRUE(j["rel_l2"].is_number()) << out;
+  EXPECT_LT(j["rel_l2"].get<double>(), 1e-4);  // the YUV inverse's 5-6 digits (docs/format.md)
   // The pca-view codec as PVF: btf-info reads it back.
   ASSERT_EQ(test::RunCommand(test::Tool("btf-convert") + " " + d + "c.h5 -o " + d + "c.btf --to pvf --quiet >/dev/null"), 0);
   ASSERT_EQ(test::RunCommand(test::Tool("btf-info") + " --json --quiet --no-stats " + d + "c.btf", &out), 0);
@@ -108,7 +114,7 @@ TEST(BtfConvert, BadInputAndUsageExitCodesWriteNothing) {
   // Usage: an extension that names no format, a format not written yet (option values:
   // tests/io BonnConvert.OptionsAndTargets).
   EXPECT_EQ(test::RunCommand(tool + " " + d + "a.h5 -o " + d + "out.txt 2>/dev/null"), 2);
-  EXPECT_EQ(test::RunCommand(tool + " " + d + "a.h5 -o " + d + "out.btf --to fmf 2>/dev/null"), 2);
+  EXPECT_EQ(test::RunCommand(tool + " " + d + "a.h5 -o " + d + "out.btf --to svd 2>/dev/null"), 2);
   // PVF is written from a pca-view codec only: a dataset is the wrong input (exit 3).
   EXPECT_EQ(test::RunCommand(tool + " " + d + "a.h5 -o " + d + "out.btf --to pvf 2>/dev/null"), 3);
   EXPECT_EQ(test::RunCommand(tool + " " + d + "none.btf -o " + d + "out.h5 2>/dev/null"), 4);
