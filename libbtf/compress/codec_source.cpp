@@ -1,6 +1,7 @@
 #include "libbtf/compress/codec_source.h"
 
 #include "libbtf/core/error.h"
+#include "libbtf/io/bonn.h"
 #include "libbtf/io/dataset_io.h"
 #include "libbtf/io/file_kind.h"
 
@@ -37,7 +38,8 @@ std::unique_ptr<SlotSource> OpenSource(const std::filesystem::path& path) {
   const std::string format = FileFormatOf(path);
   if (format == kDatasetFormat) return OpenDatasetSource(path);
   if (format == kCodecFormat) return OpenCodecSource(path);
-  ThrowBadInput("'{}' holds format '{}'; expected a libbtf dataset or codec", path.string(), format);
+  if (IsBonnFormat(format)) return OpenBonnSource(path);
+  ThrowBadInput("'{}' holds format '{}'; expected a libbtf dataset or codec, or a Bonn .btf file", path.string(), format);
 }
 
 }  // namespace btf

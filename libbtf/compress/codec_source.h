@@ -12,8 +12,9 @@ namespace btf {
 // A codec file, decoded one view slot at a time (Codec::DecodeViewSlot).
 std::unique_ptr<SlotSource> OpenCodecSource(const std::filesystem::path& path);
 
-// Opens a dataset or codec file, chosen by its "format" attribute (FileFormatOf). Other libbtf
-// formats and foreign files throw btf::Error (bad input) naming the file.
+// Opens a dataset or codec file, chosen by its "format" attribute (FileFormatOf), or a Bonn .btf
+// file (libbtf/io/bonn.h, recognised by its signature). Other libbtf formats and foreign files
+// throw btf::Error (bad input) naming the file.
 std::unique_ptr<SlotSource> OpenSource(const std::filesystem::path& path);
 
 }  // namespace btf

@@ -1,7 +1,9 @@
 #include "libbtf/io/dataset_stats.h"
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <vector>
 
 #include "libbtf/core/progress.h"
 
@@ -14,13 +16,15 @@ nlohmann::json ValueStats::ToJson() const {
           {"negative_count", negative_count}};
 }
 
-ValueStats ComputeValueStats(const DatasetReader& reader, const Reporter& reporter) {
-  const auto& h = reader.header();
-  std::vector<float> slot(std::size_t(h.num_lights) * h.height * h.width * h.channels);
+namespace {
+
+template <typename ReadSlot>
+ValueStats ScanValues(std::size_t slot_size, int views, ReadSlot read, const Reporter& reporter) {
+  std::vector<float> slot(slot_size);
   ValueStats s;
   double sum = 0;  // double: up to 10^9 values are summed
-  for (int v = 0; v < h.num_views; ++v) {
-    reader.ReadViewSlot(v, slot.data());
+  for (int v = 0; v < views; ++v) {
+    read(v, slot.data());
     for (float x : slot) {
       if (std::isnan(x)) {
         ++s.nan_count;
@@ -36,13 +40,26 @@ ValueStats ComputeValueStats(const DatasetReader& reader, const Reporter& report
       sum += x;
       ++s.count;
     }
-    reporter.Progress(std::size_t(v + 1), std::size_t(h.num_views), "scanning values");
+    reporter.Progress(std::size_t(v + 1), std::size_t(views), "scanning values");
   }
   s.mean = s.count ? sum / double(s.count) : 0.0;
   return s;
 }
 
-namespace {
+}  // namespace
+
+ValueStats ComputeValueStats(const DatasetReader& reader, const Reporter& reporter) {
+  const auto& h = reader.header();
+  return ScanValues(
+      std::size_t(h.num_lights) * h.height * h.width * h.channels, h.num_views,
+      [&](int v, float* out) { reader.ReadViewSlot(v, out); }, reporter);
+}
+
+ValueStats ComputeValueStats(const SlotSource& source, const Reporter& reporter) {
+  return ScanValues(
+      source.slot_size(), source.views().size(), [&](int v, float* out) { source.ReadViewSlot(v, out); }, reporter);
+}
+
 nlohmann::json DescribeSampling(const Sampling& s) {
   nlohmann::json dirs = nlohmann::json::array();
   for (int i = 0; i < s.size(); ++i) {
@@ -51,7 +68,6 @@ nlohmann::json DescribeSampling(const Sampling& s) {
   }
   return {{"name", s.name()}, {"count", s.size()}, {"theta_phi_deg", dirs}};
 }
-}  // namespace
 
 nlohmann::json DescribeDatasetHeader(const DatasetHeader& h) {
   std::error_code ec;

@@ -6,6 +6,7 @@
 
 #include "libbtf/core/progress.h"
 #include "libbtf/io/dataset_io.h"
+#include "libbtf/io/slot_source.h"
 
 namespace btf {
 
@@ -18,6 +19,11 @@ struct ValueStats {
   nlohmann::json ToJson() const;
 };
 ValueStats ComputeValueStats(const DatasetReader& reader, const Reporter& reporter = {});
+// The same over any view-slot source (e.g. a Bonn .btf file, decoded slot by slot).
+ValueStats ComputeValueStats(const SlotSource& source, const Reporter& reporter = {});
+
+// {"name", "count", "theta_phi_deg": [[theta, phi], ...]} as btf-info prints samplings.
+nlohmann::json DescribeSampling(const Sampling& sampling);
 
 // Summary of a dataset file for btf-info: shape, samplings, conventions, storage, size on disk.
 nlohmann::json DescribeDatasetHeader(const DatasetHeader& header);

@@ -11,7 +11,7 @@ namespace btf {
 namespace {
 
 TEST(ToolConventions, EveryToolPrintsItsVersion) {
-  for (const char* tool : {"btf-info", "btf-synth", "btf-register", "btf-compress", "btf-eval"}) {
+  for (const char* tool : {"btf-info", "btf-synth", "btf-register", "btf-compress", "btf-eval", "btf-convert"}) {
     std::string out;
     ASSERT_EQ(test::RunCommand(test::Tool(tool) + " --version", &out), 0) << tool;
     EXPECT_EQ(out, std::string(tool) + " " + Version() + "\n") << tool;
@@ -74,6 +74,9 @@ TEST(ToolConventions, EveryJsonDocumentHasTheEnvelopeAndTimingSchema) {
   CheckSeconds(j["seconds"], "btf-eval stability");
   for (const auto& c : j["cases"]) CheckSeconds(c["seconds"], "stability case");
   j = CheckEnvelope(test::Tool("btf-info") + " " + d + "c.h5", "btf-info");
+  j = CheckEnvelope(test::Tool("btf-convert") + " " + d + "a.h5 -o " + d + "a.btf", "btf-convert");
+  CheckSeconds(j["seconds"], "btf-convert");
+  EXPECT_EQ(j["options"]["storage"], "float32");  // ConvertOptions' default
   j = CheckEnvelope(test::Tool("btf-register") + " run " + std::string(BTF_SOURCE_DIR) +
                         "/sample_data/photos/manifest.json --resolution 8 -o " + d + "reg.h5",
                     "btf-register");

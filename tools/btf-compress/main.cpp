@@ -4,6 +4,7 @@
 //   btf-compress export CODEC --format schneider -o DIR
 #include "libbtf/compress/codec.h"
 #include "libbtf/export/schneider.h"
+#include "libbtf/io/bonn.h"
 #include "tools/common/cli.h"
 
 namespace {
@@ -31,8 +32,9 @@ int RunCompress(const CLI::App& app, const btf::cli::CommonFlags& common, Compre
   btf::AtomicOutput target(f.output);
   target.Reserve();
   btf::Codec codec;
-  const btf::CompressSummary s =
-      btf::Compress(f.options, *btf::OpenDatasetSource(f.dataset), &codec, btf::cli::MakeReporter(common));
+  // A dataset file or a Bonn .btf file (decoded one view slot at a time).
+  const auto input = btf::IsBonnFile(f.dataset) ? btf::OpenBonnSource(f.dataset) : btf::OpenDatasetSource(f.dataset);
+  const btf::CompressSummary s = btf::Compress(f.options, *input, &codec, btf::cli::MakeReporter(common));
   btf::WriteCodec(target, codec, "btf-compress");
   btf::cli::PrintSummary(app, common, s, {{"output", f.output}});
   if (!common.json) fmt::print("  output                {}\n", f.output);
@@ -69,7 +71,7 @@ int main(int argc, char** argv) {
 
   CompressFlags cf;
   btf::CompressOptions& co = cf.options;
-  app.add_option("DATASET", cf.dataset, "Input dataset (.h5, libbtf-dataset)");
+  app.add_option("DATASET", cf.dataset, "Input dataset (.h5, libbtf-dataset) or Bonn .btf file");
   app.add_option("--method", cf.method, "pca-view | lpca");
   app.add_option("--components,-c", co.components,
                  "Components per view slot (pca-view) or per cluster (lpca); the maximum with --error/--energy");

@@ -1,7 +1,8 @@
-// btf-info FILE: summary of a libbtf dataset or codec file (docs/btf-info.md).
+// btf-info FILE: summary of a libbtf dataset or codec file, or a Bonn .btf file (docs/btf-info.md).
 #include <fmt/format.h>
 
 #include "libbtf/compress/codec.h"
+#include "libbtf/io/bonn.h"
 #include "libbtf/io/dataset_stats.h"
 #include "libbtf/io/file_kind.h"
 #include "tools/common/cli.h"
@@ -22,14 +23,14 @@ void PrintHuman(const nlohmann::json& j) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"Print the summary of a libbtf dataset or codec file: shape, samplings, conventions, size on disk, "
+  CLI::App app{"Print the summary of a libbtf dataset or codec file, or a Bonn .btf file: shape, samplings, conventions, size on disk, "
                "value range and NaN count.",
                "btf-info"};
   btf::cli::Configure(app);
   btf::cli::CommonFlags common;
   std::string path;
   bool no_stats = false;
-  app.add_option("FILE", path, "Dataset (.h5) or codec file")->required();
+  app.add_option("FILE", path, "Dataset (.h5), codec file or Bonn .btf file")->required();
   app.add_flag("--no-stats", no_stats, "Skip the value scan (min/max/NaN count), which reads every value");
   btf::cli::AddCommonFlags(app, common);
   return btf::cli::Main(argc, argv, app, [&] {
@@ -41,7 +42,9 @@ int main(int argc, char** argv) {
     else if (format == btf::kCodecFormat) {
       j = btf::ReadCodec(path).Describe();  // method, shape, samplings, components, sizes, transform
       j["path"] = path;
-    } else
+    } else if (btf::IsBonnFormat(format))
+      j = btf::DescribeBonnFile(path, !no_stats, reporter);
+    else
       throw btf::Error(btf::ExitCode::kBadInput,
                        fmt::format("'{}' holds format '{}', which this build of libbtf does not know", path, format));
     if (common.json)

@@ -1,0 +1,1006 @@
+#include "libbtf/io/bonn.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <bit>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <limits>
+
+#include <Eigen/Core>
+
+#include "libbtf/core/atomic_file.h"
+#include "libbtf/core/error.h"
+#include "libbtf/io/dataset_stats.h"
+#include "libbtf/io/half.h"
+
+namespace btf {
+
+static_assert(std::endian::native == std::endian::little, "Bonn files are little-endian; this reader does not swap");
+
+namespace {
+
+// Known signatures, longest first so that the longest match wins (docs/format.md).
+constexpr const char* kSignatures[] = {"!BDIF06R2!", "!DFMF08FCR", "!FMF12FCER", "!FMF06FCR",
+                                       "!PVF06FCR",  "!FMF06FC",   "!PVF06FC"};
+constexpr std::int32_t kLegacyPvfMagic = 301074;
+
+using RowMatrix = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+// A read-only file accessed by offset (pread), so several threads may decode at once.
+class BinFile {
+ public:
+  explicit BinFile(const std::filesystem::path& path) : path_(path.string()) {
+    std::error_code ec;
+    if (!std::filesystem::exists(path, ec)) ThrowIo("cannot open '{}': no such file", path_);
+    fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd_ < 0) ThrowIo("cannot open '{}': {}", path_, std::strerror(errno));
+    const off_t end = ::lseek(fd_, 0, SEEK_END);
+    if (end < 0) {
+      ::close(fd_);
+      ThrowIo("cannot read '{}': {}", path_, std::strerror(errno));
+    }
+    size_ = std::uint64_t(end);
+  }
+  ~BinFile() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  BinFile(const BinFile&) = delete;
+  BinFile& operator=(const BinFile&) = delete;
+
+  const std::string& path() const { return path_; }
+  std::uint64_t size() const { return size_; }
+
+  // Throws bad input unless [offset, offset + bytes) lies in the file. `bytes` in double: a
+  // header's counts can multiply past 2^64.
+  void Need(std::uint64_t offset, double bytes, const std::string& field) const {
+    if (double(offset) + bytes > double(size_))
+      ThrowBadInput("'{}': {} at byte {} needs {:.0f} bytes but the file ends at byte {}: the file is truncated or "
+                    "the field is corrupt",
+                    path_, field, offset, bytes, size_);
+  }
+  void ReadAt(std::uint64_t offset, void* dst, std::size_t bytes, const std::string& field) const {
+    Need(offset, double(bytes), field);
+    auto* p = static_cast<char*>(dst);
+    while (bytes > 0) {
+      const ssize_t got = ::pread(fd_, p, bytes, off_t(offset));
+      if (got < 0 && errno == EINTR) continue;
+      if (got <= 0) ThrowIo("cannot read '{}' at byte {}: {}", path_, offset, got < 0 ? std::strerror(errno) : "end of file");
+      p += got;
+      offset += std::uint64_t(got);
+      bytes -= std::size_t(got);
+    }
+  }
+
+ private:
+  std::string path_;
+  int fd_ = -1;
+  std::uint64_t size_ = 0;
+};
+
+// Sequential reading of header fields; errors name the field and its byte offset.
+class Cursor {
+ public:
+  Cursor(const BinFile& f, std::uint64_t pos) : f_(f), pos_(pos) {}
+  std::uint64_t pos() const { return pos_; }
+  void Skip(double bytes, const std::string& field) {
+    f_.Need(pos_, bytes, field);
+    pos_ += std::uint64_t(bytes);
+  }
+  template <typename T>
+  T Get(const std::string& field) {
+    T v;
+    f_.ReadAt(pos_, &v, sizeof v, field);
+    pos_ += sizeof v;
+    return v;
+  }
+  std::uint32_t U32(const std::string& field) { return Get<std::uint32_t>(field); }
+  float F32(const std::string& field) {
+    const std::uint64_t at = pos_;
+    const float v = Get<float>(field);
+    if (!std::isfinite(v)) Fail(at, field, fmt::format("holds {}; it must be finite", v));
+    return v;
+  }
+  std::string Chars(std::size_t n, const std::string& field) {
+    std::string s(n, '\0');
+    f_.ReadAt(pos_, s.data(), n, field);
+    pos_ += n;
+    return s;
+  }
+  // A count that must lie in [lo, hi].
+  std::uint32_t Count(const std::string& field, std::uint32_t lo, std::uint32_t hi) {
+    const std::uint64_t at = pos_;
+    const std::uint32_t v = U32(field);
+    if (v < lo || v > hi) Fail(at, field, fmt::format("is {}; expected {} to {}", v, lo, hi));
+    return v;
+  }
+  [[noreturn]] void Fail(std::uint64_t at, const std::string& field, const std::string& problem) const {
+    ThrowBadInput("'{}': {} at byte {} {}", f_.path(), field, at, problem);
+  }
+  const BinFile& file() const { return f_; }
+
+ private:
+  const BinFile& f_;
+  std::uint64_t pos_;
+};
+
+std::string TrimNul(const std::string& s) {
+  const auto end = s.find('\0');
+  std::string t = end == std::string::npos ? s : s.substr(0, end);
+  while (!t.empty() && (t.back() == ' ' || t.back() == '\n' || t.back() == '\r')) t.pop_back();
+  return t;
+}
+
+float ScalarAt(const unsigned char* p, int scalar_size) {
+  switch (scalar_size) {
+    case 2: {
+      std::uint16_t h;
+      std::memcpy(&h, p, 2);
+      return HalfToFloat(h);
+    }
+    case 4: {
+      float f;
+      std::memcpy(&f, p, 4);
+      return f;
+    }
+    default: {
+      double d;
+      std::memcpy(&d, p, 8);
+      return float(d);
+    }
+  }
+}
+
+int ScalarSize(Cursor& c, const std::string& field) {
+  const std::uint64_t at = c.pos();
+  const int s = c.Get<std::uint8_t>(field);
+  if (s != 2 && s != 4 && s != 8) c.Fail(at, field, fmt::format("is {}; expected 2 (half), 4 (float) or 8 (double)", s));
+  return s;
+}
+
+// One stored factor matrix: where it is and how to read it (rows x stride scalars, row-major,
+// of which the first k columns are used).
+struct MatrixRef {
+  std::uint64_t offset = 0;
+  std::uint64_t rows = 0;
+  int stride = 0, k = 0, scalar_size = 2;
+  std::string field;
+  double bytes() const { return double(rows) * stride * scalar_size; }
+};
+
+MatrixRef Locate(Cursor& c, std::uint64_t rows, int stride, int k, int scalar_size, const std::string& field) {
+  MatrixRef m{c.pos(), rows, stride, k, scalar_size, field};
+  c.Skip(m.bytes(), field);
+  return m;
+}
+
+// Reads a factor matrix into rows x k floats; NaN/Inf are refused naming the element's offset.
+RowMatrix Load(const BinFile& f, const MatrixRef& m) {
+  CheckAllocation(4.0 * double(m.rows) * m.k, fmt::format("'{}': {}", f.path(), m.field));
+  RowMatrix out(Eigen::Index(m.rows), m.k);
+  const std::size_t row_bytes = std::size_t(m.stride) * m.scalar_size;
+  const std::size_t rows_per_read = std::max<std::size_t>(1, (std::size_t(8) << 20) / std::max<std::size_t>(1, row_bytes));
+  std::vector<unsigned char> buf;
+  for (std::uint64_t r0 = 0; r0 < m.rows && row_bytes > 0; r0 += rows_per_read) {
+    const std::size_t n = std::size_t(std::min<std::uint64_t>(rows_per_read, m.rows - r0));
+    buf.resize(n * row_bytes);
+    const std::uint64_t at = m.offset + r0 * row_bytes;
+    f.ReadAt(at, buf.data(), buf.size(), m.field);
+    for (std::size_t r = 0; r < n; ++r)
+      for (int j = 0; j < m.k; ++j) {
+        const std::size_t i = r * row_bytes + std::size_t(j) * m.scalar_size;
+        const float v = ScalarAt(buf.data() + i, m.scalar_size);
+        if (!std::isfinite(v))
+          ThrowBadInput("'{}': {} at byte {} (row {}, component {}) holds {}; factors must be finite", f.path(),
+                        m.field, at + i, r0 + r, j, v);
+        out(Eigen::Index(r0 + r), j) = v;
+      }
+  }
+  return out;
+}
+
+// Per view slot of a PVF file.
+struct PvfView {
+  std::uint64_t weights_rows = 0, dim = 0;
+  int k = 0, scalar_size = 2;
+  std::uint64_t mean_offset = 0;
+  MatrixRef components, weights;
+};
+
+}  // namespace
+
+const char* BonnFormatName(BonnFormat format) {
+  switch (format) {
+    case BonnFormat::kBdi: return "bdi";
+    case BonnFormat::kDfmf: return "dfmf";
+    case BonnFormat::kFmf: return "fmf";
+    case BonnFormat::kPvf: return "pvf";
+  }
+  return "?";
+}
+
+bool BonnColorModelSupported(int m) { return m == 0 || m == 1 || m == 3 || m == 4 || (m >= 9 && m <= 12); }
+
+std::string BonnColorModelName(int m) {
+  static const char* const kNames[] = {"rgb",     "yuv",     "lab",           "pca",           "ycocg",
+                                       "spectral", "spectral_linear", "unknown", "unknown", "ylog_uv",
+                                       "ylog_ulog_vlog", "ylog_udivy_vdivy", "log_rgb"};
+  return m >= 0 && m <= 12 ? kNames[m] : "unknown";
+}
+
+void BonnUndecorrelate(int model, const std::array<float, 3>& mean, const std::array<float, 9>& t, int channels,
+                       float* values, std::size_t n) {
+  const double eps = kBonnEpsilon;
+  if (model == 0) return;
+  if (model == 12) {
+    for (std::size_t i = 0; i < n * std::size_t(channels); ++i) values[i] = float(std::exp(double(values[i])) - eps);
+    return;
+  }
+  BTF_CHECK(channels == 3 && BonnColorModelSupported(model));
+  for (std::size_t i = 0; i < n; ++i) {
+    float* p = values + 3 * i;
+    double a = p[0], b = p[1], c = p[2];
+    double r = 0, g = 0, bl = 0;
+    if (model == 3) {
+      r = a * t[0] + b * t[3] + c * t[6] + mean[0];
+      g = a * t[1] + b * t[4] + c * t[7] + mean[1];
+      bl = a * t[2] + b * t[5] + c * t[8] + mean[2];
+    } else if (model == 4) {
+      r = a + b - c;
+      g = a + c;
+      bl = a - b - c;
+    } else {
+      // YUV family: model 1 stores YUV; 9-11 store a logarithmic Y and U, V as below.
+      if (model >= 9) a = std::exp(a) - eps;
+      if (model == 10) {
+        b = b == 0 ? 0 : std::copysign(eps * std::exp(std::abs(b)), b);
+        c = c == 0 ? 0 : std::copysign(eps * std::exp(std::abs(c)), c);
+      } else if (model == 11) {
+        b *= a + eps;
+        c *= a + eps;
+      }
+      r = a + 1.13983 * c;
+      g = a - 0.39465 * b - 0.5806 * c;
+      bl = a + 2.03211 * b;
+    }
+    p[0] = float(r);
+    p[1] = float(g);
+    p[2] = float(bl);
+  }
+}
+
+std::string BonnSignatureOf(const std::filesystem::path& path) {
+  const BinFile f(path);
+  char head[16] = {};
+  const std::size_t n = std::size_t(std::min<std::uint64_t>(f.size(), 10));
+  if (n == 0) return "";
+  f.ReadAt(0, head, n, "signature");
+  if (head[0] != '!') return "";
+  const std::string h(head, n);
+  for (const char* s : kSignatures)
+    if (h.starts_with(s)) return s;
+  std::string shown;
+  for (char ch : h) shown += (ch >= 32 && ch < 127) ? ch : '?';
+  ThrowBadInput("'{}': signature at byte 0 is '{}', which is no known Bonn .btf signature (known: !DFMF08FCR, "
+                "!FMF12FCER, !FMF06FCR, !FMF06FC, !PVF06FCR, !PVF06FC, !BDIF06R2!)",
+                path.string(), shown);
+}
+
+bool IsBonnFile(const std::filesystem::path& path) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) return false;
+  char c = 0;
+  {
+    const BinFile f(path);
+    if (f.size() == 0) return false;
+    f.ReadAt(0, &c, 1, "signature");
+  }
+  return c == '!';
+}
+
+DatasetInfo BonnHeader::Info() const {
+  DatasetInfo info;
+  info.units = "relative";
+  info.color_space = channel_names == std::vector<std::string>{"R", "G", "B"} ? "linear_srgb" : "multispectral";
+  info.cos_theta_i_included = cosine_flag;
+  info.channel_names = channel_names;
+  info.texel_size_mm = ppmm > 0 ? 1.0 / ppmm : 0.0;
+  info.provenance = {{"source", "bonn-btf"},
+                     {"file", std::filesystem::path(path).filename().string()},
+                     {"signature", signature},
+                     {"measurement_setup", measurement_setup},
+                     {"image_sensor", image_sensor},
+                     {"light_source", light_source},
+                     {"rgb_scale_factor", rgb_scale_factor}};
+  return info;
+}
+
+struct BonnReader::Impl {
+  explicit Impl(const std::filesystem::path& p) : file(p) {}
+  BinFile file;
+  BonnHeader h;
+  // DFMF: per channel; FMF: one. `abrdf` rows are directions (and channels for FMF), `texture`
+  // rows are texels (and channels for transposed FMF).
+  std::vector<MatrixRef> abrdf_refs, texture_refs;
+  std::vector<RowMatrix> abrdf, texture;
+  std::vector<PvfView> pvf;
+  std::vector<std::uint64_t> chunk_offsets;
+  std::vector<std::int64_t> storage_index;  // BDI: texel -> stored ABRDF index, -1 = masked out
+  bool loaded = false;
+
+  void ReadMeta(Cursor& c);
+  void ReadSampling(Cursor& c);
+  void ReadSize(Cursor& c, bool rotations);
+  void ReadRotations(Cursor& c);
+  void ReadDfmf(Cursor& c);
+  void ReadFmf(Cursor& c);
+  void ReadPvf(Cursor& c);
+  void ReadBdi(Cursor& c);
+  void CheckEnd(const Cursor& c) const {
+    if (c.pos() != file.size())
+      ThrowBadInput("'{}': {} trailing bytes after the last block (which ends at byte {}): the sizes in the header "
+                    "disagree with the file length",
+                    file.path(), file.size() - c.pos(), c.pos());
+  }
+  void DecodeSlot(int view, float* out) const;
+};
+
+void BonnReader::Impl::ReadMeta(Cursor& c) {
+  const std::uint64_t start = c.pos();
+  const std::uint32_t size = c.U32("meta block struct_size");
+  h.meta_version = c.Count("meta block struct_version", 1, 4);
+  h.measurement_setup = TrimNul(c.Chars(80, "measurement_setup"));
+  h.image_sensor = TrimNul(c.Chars(80, "image_sensor"));
+  h.light_source = TrimNul(c.Chars(80, "light_source"));
+  h.ppmm = c.F32("ppmm");
+  for (int i = 0; i < 3; ++i) h.rgb_scale_factor[std::size_t(i)] = c.F32("rgb_scale_factor");
+  if (h.meta_version > 1) h.cosine_flag = c.U32("cosine_flag") != 0;
+  if (h.meta_version > 2) {
+    const std::uint64_t at = c.pos();
+    const std::uint32_t xml_size = c.U32("xml_size");
+    c.file().Need(c.pos(), double(xml_size), fmt::format("XML text (xml_size at byte {})", at));
+    h.xml = TrimNul(c.Chars(xml_size, "XML text"));
+  }
+  if (h.meta_version > 3) {
+    const std::uint32_t n = c.Count("num_channels", 1, 1024);
+    h.channel_names.clear();
+    for (std::uint32_t i = 0; i < n; ++i) {
+      const std::string field = fmt::format("channel {} name length", i);
+      const std::uint32_t len = c.Count(field, 0, 4096);
+      std::string name = TrimNul(c.Chars(len, fmt::format("channel {} name", i)));
+      if (name.empty()) name = fmt::format("C{}", i);
+      h.channel_names.push_back(name);
+    }
+  }
+  if (c.pos() != start + size)
+    c.Fail(start, "meta block struct_size",
+           fmt::format("is {} but the meta block (version {}) holds {} bytes", size, h.meta_version, c.pos() - start));
+}
+
+void BonnReader::Impl::ReadSampling(Cursor& c) {
+  const std::uint64_t at = c.pos();
+  const std::uint32_t nv = c.U32("n_views");
+  if (nv == 0) c.Fail(at, "n_views", "is 0");
+  c.file().Need(c.pos(), 12.0 * nv, fmt::format("sampling of {} views (n_views at byte {})", nv, at));
+  std::vector<Vec3> views, lights;
+  std::vector<float> first_lights;
+  views.reserve(nv);
+  for (std::uint32_t v = 0; v < nv; ++v) {
+    const float theta = c.F32(fmt::format("view {} theta", v)), phi = c.F32(fmt::format("view {} phi", v));
+    views.push_back(DirectionFromAngles(theta, phi));
+    const std::uint64_t nl_at = c.pos();
+    const std::string field = fmt::format("view {} n_lights", v);
+    const std::uint32_t nl = c.U32(field);
+    if (nl == 0) c.Fail(nl_at, field, "is 0");
+    if (v > 0 && nl != first_lights.size() / 2)
+      c.Fail(nl_at, field,
+             fmt::format("is {} but view 0 has {} lights: libbtf reads tensor-product samplings only", nl,
+                         first_lights.size() / 2));
+    c.file().Need(c.pos(), 8.0 * nl, fmt::format("light list of view {} ({} lights, n_lights at byte {})", v, nl, nl_at));
+    std::vector<float> list(2 * std::size_t(nl));
+    const std::uint64_t list_at = c.pos();
+    c.file().ReadAt(list_at, list.data(), list.size() * 4, fmt::format("light list of view {}", v));
+    c.Skip(8.0 * nl, "light list");
+    for (std::size_t i = 0; i < list.size(); ++i)
+      if (!std::isfinite(list[i]))
+        c.Fail(list_at + 4 * i, fmt::format("view {} light {} {}", v, i / 2, i % 2 ? "phi" : "theta"),
+               "is not finite");
+    if (v == 0) {
+      first_lights = list;
+      for (std::size_t i = 0; i < nl; ++i) lights.push_back(DirectionFromAngles(list[2 * i], list[2 * i + 1]));
+    } else if (list != first_lights) {
+      // Compared as values (0 equals -0), all finite: a difference exists at some i < size.
+      std::size_t i = 0;
+      while (i + 1 < list.size() && list[i] == first_lights[i]) ++i;
+      c.Fail(list_at + 4 * i, fmt::format("view {} light {} {}", v, i / 2, i % 2 ? "phi" : "theta"),
+             fmt::format("is {} but view 0 has {}: libbtf reads tensor-product samplings only (the same light list "
+                         "for every view)",
+                         list[i], first_lights[i]));
+    }
+  }
+  const std::string name = "bonn:" + std::filesystem::path(file.path()).filename().string();
+  h.views = Sampling(name + ":views", std::move(views));
+  h.lights = Sampling(name + ":lights", std::move(lights));
+}
+
+void BonnReader::Impl::ReadSize(Cursor& c, bool rotations) {
+  h.width = int(c.Count("width", 1, 1u << 20));
+  h.height = int(c.Count("height", 1, 1u << 20));
+  CheckAllocation(4.0 * h.lights.size() * h.width * h.height * h.channels(),
+                  fmt::format("'{}': one view slot", file.path()));
+  if (rotations) ReadRotations(c);
+}
+
+void BonnReader::Impl::ReadRotations(Cursor& c) {
+  const std::uint64_t at = c.pos();
+  const std::uint32_t n = c.U32("n_rotations");
+  c.file().Need(c.pos(), 36.0 * n, fmt::format("{} rotations (n_rotations at byte {})", n, at));
+  h.rotations.resize(n);
+  for (auto& r : h.rotations)
+    for (auto& x : r) x = c.F32("rotation");
+}
+
+void BonnReader::Impl::ReadDfmf(Cursor& c) {
+  h.header_components = c.U32("num_components");
+  const std::uint64_t model_at = c.pos();
+  h.color_model = c.Get<std::int32_t>("color_model");
+  if (!BonnColorModelSupported(h.color_model))
+    c.Fail(model_at, "color_model",
+           fmt::format("is {} ({}), which libbtf does not decode (supported: 0, 1, 3, 4, 9, 10, 11, 12)", h.color_model,
+                       BonnColorModelName(h.color_model)));
+  if (h.color_model != 0 && h.color_model != 12 && h.channels() != 3)
+    c.Fail(model_at, "color_model",
+           fmt::format("is {} ({}), which needs 3 channels, but the file has {}", h.color_model,
+                       BonnColorModelName(h.color_model), h.channels()));
+  for (auto& m : h.color_mean) m = c.F32("color_mean");
+  for (auto& t : h.color_transform) t = c.F32("color_transform");
+  const std::uint64_t dirs = std::uint64_t(h.lights.size()) * h.views.size();
+  const std::uint64_t texels = std::uint64_t(h.width) * h.height;
+  for (int ch = 0; ch < h.channels(); ++ch) {
+    const int ss = ScalarSize(c, fmt::format("channel {} scalar_size", ch));
+    const std::uint32_t k = c.Count(fmt::format("channel {} num_components", ch), 0, 1u << 20);
+    const std::uint64_t rows_at = c.pos();
+    const std::uint32_t rows = c.U32(fmt::format("channel {} rows", ch));
+    const std::uint32_t cols = c.U32(fmt::format("channel {} cols", ch));
+    bool transposed;
+    if (rows == dirs && cols == texels)
+      transposed = false;
+    else if (rows == texels && cols == dirs)
+      transposed = true;
+    else
+      c.Fail(rows_at, fmt::format("channel {} rows x cols", ch),
+             fmt::format("is {} x {}; expected n_lights*n_views x width*height = {} x {} (or transposed)", rows, cols,
+                         dirs, texels));
+    if (ch > 0 && transposed != h.transposed)
+      c.Fail(rows_at, fmt::format("channel {} rows x cols", ch), "uses a different layout than channel 0");
+    h.transposed = transposed;
+    c.Skip(double(k) * ss, fmt::format("channel {} singular values", ch));
+    MatrixRef u = Locate(c, rows, int(k), int(k), ss, fmt::format("channel {} U", ch));
+    MatrixRef v = Locate(c, cols, int(k), int(k), ss, fmt::format("channel {} SxV", ch));
+    if (transposed) std::swap(u, v);
+    abrdf_refs.push_back(u);
+    texture_refs.push_back(v);
+    h.components.push_back(int(k));
+    h.scalar_sizes.push_back(ss);
+  }
+}
+
+void BonnReader::Impl::ReadFmf(Cursor& c) {
+  if (h.signature == "!FMF12FCER") {
+    const std::uint64_t at = c.pos();
+    h.fmf_header_version = c.Get<std::uint8_t>("header_version");
+    if (h.fmf_header_version >= 3)
+      c.Fail(at, "header_version", fmt::format("is {}; libbtf reads FMF header versions 0 to 2", h.fmf_header_version));
+  }
+  if (h.fmf_header_version >= 1) h.dynamic_range_reduction = c.U32("dynamic_range_reduction");
+  if (h.fmf_header_version >= 2) {
+    const std::uint64_t at = c.pos();
+    h.height_map_width = int(c.Count("height map width", 0, 1u << 20));
+    h.height_map_height = int(c.Count("height map height", 0, 1u << 20));
+    c.Skip(2.0 * h.height_map_width * h.height_map_height, fmt::format("height map (size at byte {})", at));
+  }
+  const std::uint32_t k_file = c.Count("num_components", 0, 1u << 20);
+  const int ss = ScalarSize(c, "scalar_size");
+  const std::uint32_t stride = c.Count("stored components", 0, 1u << 20);
+  const int k = int(std::min(k_file, stride));
+  const std::uint64_t rows_at = c.pos();
+  const std::uint32_t rows = c.U32("rows");
+  const std::uint32_t cols = c.U32("cols");
+  const std::uint64_t dirs = std::uint64_t(h.lights.size()) * h.views.size();
+  const std::uint64_t texels = std::uint64_t(h.width) * h.height;
+  const std::uint64_t nc = std::uint64_t(h.channels());
+  if (rows == nc * dirs && cols == texels)
+    h.transposed = false;
+  else if (rows == nc * texels && cols == dirs)
+    h.transposed = true;
+  else
+    c.Fail(rows_at, "rows x cols",
+           fmt::format("is {} x {}; expected channels*n_lights*n_views x width*height = {} x {} (or transposed)", rows,
+                       cols, nc * dirs, texels));
+  c.Skip(double(stride) * ss, "singular values");
+  MatrixRef u = Locate(c, rows, int(stride), k, ss, "U");
+  MatrixRef v = Locate(c, cols, int(stride), k, ss, "SxV");
+  if (h.transposed) std::swap(u, v);
+  abrdf_refs.push_back(u);
+  texture_refs.push_back(v);
+  h.components.push_back(k);
+  h.scalar_sizes.push_back(ss);
+}
+
+void BonnReader::Impl::ReadPvf(Cursor& c) {
+  std::uint32_t slots = 0;
+  if (h.pvf_legacy) {
+    c.Skip(4, "legacy magic");
+    h.header_components = c.U32("num_components");
+    h.width = int(c.Count("width", 1, 1u << 20));
+    h.height = int(c.Count("height", 1, 1u << 20));
+    const std::uint64_t at = c.pos();
+    slots = c.U32("view_slots");
+    ReadSampling(c);
+    CheckAllocation(4.0 * h.lights.size() * h.width * h.height * h.channels(),
+                    fmt::format("'{}': one view slot", file.path()));
+    if (slots != std::uint32_t(h.views.size()))
+      c.Fail(at, "view_slots", fmt::format("is {} but the sampling has {} views", slots, h.views.size()));
+  } else {
+    h.header_components = c.U32("num_components");
+    const std::uint64_t at = c.pos();
+    slots = c.U32("view_slots");
+    if (slots != std::uint32_t(h.views.size()))
+      c.Fail(at, "view_slots", fmt::format("is {} but the sampling has {} views", slots, h.views.size()));
+  }
+  const std::uint64_t nc = std::uint64_t(h.channels()), nl = std::uint64_t(h.lights.size());
+  const std::uint64_t texels = std::uint64_t(h.width) * h.height;
+  for (std::uint32_t v = 0; v < slots; ++v) {
+    PvfView p;
+    p.scalar_size = ScalarSize(c, fmt::format("view {} scalar_size", v));
+    p.k = int(c.Count(fmt::format("view {} num_components", v), 0, 1u << 20));
+    const std::uint64_t at = c.pos();
+    p.weights_rows = c.U32(fmt::format("view {} n_weights", v));
+    p.dim = c.U32(fmt::format("view {} dimension", v));
+    bool images;
+    if (p.weights_rows == texels && p.dim == nc * nl)
+      images = false;
+    else if (p.weights_rows == nl && p.dim == nc * texels)
+      images = true;
+    else
+      c.Fail(at, fmt::format("view {} n_weights x dimension", v),
+             fmt::format("is {} x {}; expected width*height x channels*n_lights = {} x {} (light fields) or n_lights x "
+                         "channels*width*height = {} x {} (images)",
+                         p.weights_rows, p.dim, texels, nc * nl, nl, nc * texels));
+    if (v > 0 && images != h.pvf_images)
+      c.Fail(at, fmt::format("view {} n_weights x dimension", v), "uses a different layout than view 0");
+    h.pvf_images = images;
+    c.Skip(double(p.k) * p.scalar_size, fmt::format("view {} eigenvalues", v));
+    p.mean_offset = c.pos();
+    c.Skip(double(p.dim) * p.scalar_size, fmt::format("view {} mean", v));
+    p.components = Locate(c, p.dim, p.k, p.k, p.scalar_size, fmt::format("view {} components", v));
+    p.weights = Locate(c, p.weights_rows, p.k, p.k, p.scalar_size, fmt::format("view {} weights", v));
+    CheckAllocation(4.0 * (double(p.dim) * (p.k + 1) + double(p.weights_rows) * p.k),
+                    fmt::format("'{}': view {} factors", file.path(), v));
+    h.components.push_back(p.k);
+    h.scalar_sizes.push_back(p.scalar_size);
+    pvf.push_back(p);
+  }
+}
+
+void BonnReader::Impl::ReadBdi(Cursor& c) {
+  h.width = int(c.Count("width", 1, 1u << 20));
+  h.height = int(c.Count("height", 1, 1u << 20));
+  CheckAllocation(4.0 * h.lights.size() * h.width * h.height * h.channels(),
+                  fmt::format("'{}': one view slot", file.path()));
+  h.scan_lines_per_chunk = c.Count("scan_lines_per_chunk", 1, 1u << 20);
+  const std::uint64_t comp_at = c.pos();
+  h.compression = c.Get<std::uint8_t>("compression");
+  if (h.compression == 1) c.Fail(comp_at, "compression", "is 1 (bzip2-compressed chunks), which libbtf does not read");
+  if (h.compression != 0 && h.compression != 2)
+    c.Fail(comp_at, "compression", fmt::format("is {}; expected 0 (full) or 2 (sparse)", h.compression));
+  const std::uint64_t texels = std::uint64_t(h.width) * h.height;
+  std::vector<std::uint8_t> mask(texels);
+  const std::uint64_t mask_at = c.pos();
+  c.file().ReadAt(mask_at, mask.data(), mask.size(), "mask");
+  c.Skip(double(texels), "mask");
+  storage_index.assign(texels, -1);
+  std::int64_t stored = 0;
+  for (std::uint64_t t = 0; t < texels; ++t)
+    if (h.compression == 0 || mask[t] != 0) storage_index[t] = stored++;
+  h.stored_texels = std::uint64_t(stored);
+  ReadRotations(c);
+  const std::uint64_t abrdf_bytes = 2ull * h.views.size() * h.lights.size() * std::uint64_t(h.channels());
+  const std::uint64_t per_chunk = std::uint64_t(h.width) * h.scan_lines_per_chunk;
+  const std::uint64_t chunks = (h.stored_texels + per_chunk - 1) / per_chunk;
+  for (std::uint64_t i = 0; i < chunks; ++i) {
+    const std::uint64_t at = c.pos();
+    const std::uint32_t bytes = c.U32(fmt::format("chunk {} byte_size", i));
+    const std::uint64_t n = std::min(per_chunk, h.stored_texels - i * per_chunk);
+    if (double(bytes) != double(n) * double(abrdf_bytes))
+      c.Fail(at, fmt::format("chunk {} byte_size", i),
+             fmt::format("is {}; expected {} ABRDFs x {} bytes = {:.0f}", bytes, n, abrdf_bytes,
+                         double(n) * double(abrdf_bytes)));
+    chunk_offsets.push_back(c.pos());
+    c.Skip(double(bytes), fmt::format("chunk {} data", i));
+  }
+}
+
+void BonnReader::Impl::DecodeSlot(int view, float* out) const {
+  BTF_CHECK(loaded && view >= 0 && view < h.views.size());
+  const int nc = h.channels(), nl = h.lights.size();
+  const std::size_t texels = std::size_t(h.width) * h.height;
+  switch (h.format) {
+    case BonnFormat::kDfmf: {
+      for (int ch = 0; ch < nc; ++ch) {
+        const RowMatrix& a = abrdf[std::size_t(ch)];
+        const RowMatrix& t = texture[std::size_t(ch)];
+        RowMatrix m = a.middleRows(Eigen::Index(view) * nl, nl) * t.transpose();  // lights x texels
+        for (int l = 0; l < nl; ++l)
+          for (std::size_t i = 0; i < texels; ++i) out[(std::size_t(l) * texels + i) * nc + ch] = m(l, Eigen::Index(i));
+      }
+      BonnUndecorrelate(h.color_model, h.color_mean, h.color_transform, nc, out, std::size_t(nl) * texels);
+      break;
+    }
+    case BonnFormat::kFmf: {
+      const RowMatrix& a = abrdf[0];
+      const RowMatrix& t = texture[0];
+      if (!h.transposed) {
+        // rows c + nc (l + nl v): a (nc nl) x texels product, scattered to [l][texel][c].
+        RowMatrix m = a.middleRows(Eigen::Index(view) * nl * nc, Eigen::Index(nl) * nc) * t.transpose();
+        for (int l = 0; l < nl; ++l)
+          for (std::size_t i = 0; i < texels; ++i)
+            for (int ch = 0; ch < nc; ++ch)
+              out[(std::size_t(l) * texels + i) * nc + ch] = m(Eigen::Index(ch + nc * l), Eigen::Index(i));
+      } else {
+        // texture rows c + nc * texel: the lights x (texels nc) product is the slot layout.
+        Eigen::Map<RowMatrix>(out, nl, Eigen::Index(texels) * nc) = a.middleRows(Eigen::Index(view) * nl, nl) * t.transpose();
+      }
+      if (h.dynamic_range_reduction != 0)
+        for (std::size_t i = 0; i < std::size_t(nl) * texels * nc; ++i)
+          out[i] = float(std::exp(double(out[i])) - kBonnEpsilon);
+      break;
+    }
+    case BonnFormat::kPvf: {
+      const PvfView& p = pvf[std::size_t(view)];
+      const RowMatrix comps = Load(file, p.components), weights = Load(file, p.weights);
+      std::vector<float> mean(p.dim);
+      {
+        std::vector<unsigned char> buf(p.dim * std::size_t(p.scalar_size));
+        file.ReadAt(p.mean_offset, buf.data(), buf.size(), fmt::format("view {} mean", view));
+        for (std::size_t i = 0; i < p.dim; ++i) {
+          mean[i] = ScalarAt(buf.data() + i * p.scalar_size, p.scalar_size);
+          if (!std::isfinite(mean[i]))
+            ThrowBadInput("'{}': view {} mean at byte {} (element {}) holds {}; factors must be finite", file.path(), view,
+                          p.mean_offset + i * p.scalar_size, i, mean[i]);
+        }
+      }
+      if (!h.pvf_images) {
+        // val(c, l, texel) = W[texel] . C[c + nc l] + M[c + nc l]: a texels x (nc nl) product.
+        RowMatrix m = weights * comps.transpose();
+        for (int l = 0; l < nl; ++l)
+          for (std::size_t i = 0; i < texels; ++i)
+            for (int ch = 0; ch < nc; ++ch) {
+              const std::size_t d = std::size_t(ch) + std::size_t(nc) * l;
+              out[(std::size_t(l) * texels + i) * nc + ch] = m(Eigen::Index(i), Eigen::Index(d)) + mean[d];
+            }
+      } else {
+        // val(c, l, texel) = W[l] . C[c + nc texel] + M[c + nc texel]: lights x (texels nc), slot layout.
+        Eigen::Map<RowMatrix> m(out, nl, Eigen::Index(texels) * nc);
+        m = weights * comps.transpose();
+        m.rowwise() += Eigen::Map<const Eigen::RowVectorXf>(mean.data(), Eigen::Index(mean.size()));
+      }
+      break;
+    }
+    case BonnFormat::kBdi: {
+      const std::size_t abrdf = std::size_t(h.views.size()) * nl * nc, part = std::size_t(nl) * nc;
+      const std::uint64_t per_chunk = std::uint64_t(h.width) * h.scan_lines_per_chunk;
+      std::vector<std::uint16_t> buf(part);
+      for (std::size_t t = 0; t < texels; ++t) {
+        const std::int64_t s = storage_index[t];
+        if (s < 0) {
+          for (int l = 0; l < nl; ++l)
+            std::fill_n(out + (std::size_t(l) * texels + t) * nc, nc, 0.0f);
+          continue;
+        }
+        const std::uint64_t off = chunk_offsets[std::size_t(std::uint64_t(s) / per_chunk)] +
+                                  (std::uint64_t(s) % per_chunk) * abrdf * 2 + std::uint64_t(view) * part * 2;
+        file.ReadAt(off, buf.data(), part * 2, fmt::format("texel {} data", t));
+        for (int l = 0; l < nl; ++l)
+          for (int ch = 0; ch < nc; ++ch)
+            out[(std::size_t(l) * texels + t) * nc + ch] = HalfToFloat(buf[std::size_t(l) * nc + ch]);
+      }
+      break;
+    }
+  }
+}
+
+BonnReader::BonnReader(const std::filesystem::path& path, bool header_only) : impl_(std::make_unique<Impl>(path)) {
+  Impl& m = *impl_;
+  BonnHeader& h = m.h;
+  h.path = path.string();
+  h.file_bytes = m.file.size();
+  h.signature = BonnSignatureOf(path);
+  if (h.signature.empty())
+    ThrowBadInput("'{}' is not a Bonn .btf file: it does not start with a signature such as '!DFMF08FCR'", h.path);
+  Cursor c(m.file, h.signature.size());
+  const bool rotations = h.signature.back() == 'R';
+  if (h.signature.starts_with("!BDI")) {
+    h.format = BonnFormat::kBdi;
+    m.ReadMeta(c);
+    m.ReadSampling(c);
+    m.ReadBdi(c);
+  } else {
+    if (h.signature.starts_with("!DFMF"))
+      h.format = BonnFormat::kDfmf;
+    else if (h.signature.starts_with("!FMF"))
+      h.format = BonnFormat::kFmf;
+    else
+      h.format = BonnFormat::kPvf;
+    if (h.format == BonnFormat::kPvf) {
+      std::int32_t magic = 0;
+      m.file.ReadAt(c.pos(), &magic, 4, "PVF header");
+      h.pvf_legacy = magic == kLegacyPvfMagic;
+    }
+    if (h.pvf_legacy) {
+      h.has_meta = false;
+    } else {
+      m.ReadMeta(c);
+      m.ReadSampling(c);
+      m.ReadSize(c, rotations);
+    }
+    if (h.format == BonnFormat::kDfmf) m.ReadDfmf(c);
+    if (h.format == BonnFormat::kFmf) m.ReadFmf(c);
+    if (h.format == BonnFormat::kPvf) m.ReadPvf(c);
+  }
+  m.CheckEnd(c);
+  if (!header_only) {
+    for (const auto& r : m.abrdf_refs) m.abrdf.push_back(Load(m.file, r));
+    for (const auto& r : m.texture_refs) m.texture.push_back(Load(m.file, r));
+    m.loaded = true;
+  }
+}
+
+BonnReader::~BonnReader() = default;
+BonnReader::BonnReader(BonnReader&&) noexcept = default;
+const BonnHeader& BonnReader::header() const { return impl_->h; }
+void BonnReader::ReadViewSlot(int view, float* out) const { impl_->DecodeSlot(view, out); }
+
+namespace {
+
+class BonnSlotSource final : public SlotSource {
+ public:
+  explicit BonnSlotSource(const std::filesystem::path& path) : reader_(path), name_(path.string()) {}
+  const std::string& name() const override { return name_; }
+  std::string kind() const override { return std::string("bonn-") + BonnFormatName(reader_.header().format); }
+  const Sampling& views() const override { return reader_.header().views; }
+  const Sampling& lights() const override { return reader_.header().lights; }
+  int height() const override { return reader_.header().height; }
+  int width() const override { return reader_.header().width; }
+  int channels() const override { return reader_.header().channels(); }
+  DatasetInfo info() const override { return reader_.header().Info(); }
+  void ReadViewSlot(int view, float* out) const override { reader_.ReadViewSlot(view, out); }
+
+ private:
+  BonnReader reader_;
+  std::string name_;
+};
+
+}  // namespace
+
+std::unique_ptr<SlotSource> OpenBonnSource(const std::filesystem::path& path) {
+  return std::make_unique<BonnSlotSource>(path);
+}
+
+nlohmann::json DescribeBonnFile(const std::filesystem::path& path, bool with_stats, const Reporter& reporter) {
+  nlohmann::json j;
+  {
+    const BonnReader r(path, /*header_only=*/true);
+    const BonnHeader& h = r.header();
+    j["path"] = path.string();
+    j["format"] = std::string("bonn-") + BonnFormatName(h.format);
+    j["signature"] = h.signature;
+    j["shape"] = {{"views", h.views.size()},
+                  {"lights", h.lights.size()},
+                  {"height", h.height},
+                  {"width", h.width},
+                  {"channels", h.channels()}};
+    j["view_sampling"] = DescribeSampling(h.views);
+    j["light_sampling"] = DescribeSampling(h.lights);
+    j["channel_names"] = h.channel_names;
+    j["components"] = h.components;
+    j["scalar_sizes"] = h.scalar_sizes;
+    if (h.format == BonnFormat::kDfmf) {
+      j["color_model"] = {{"id", h.color_model}, {"name", BonnColorModelName(h.color_model)}};
+      j["header_components"] = h.header_components;
+    }
+    if (h.format == BonnFormat::kDfmf || h.format == BonnFormat::kFmf)
+      j["layout"] = h.transposed ? "transposed (U over texels, SxV over directions)" : "U over directions, SxV over texels";
+    if (h.format == BonnFormat::kFmf) {
+      j["fmf_header_version"] = h.fmf_header_version;
+      j["dynamic_range_reduction"] = h.dynamic_range_reduction == 0 ? "none" : "log";
+      j["height_map"] = {h.height_map_width, h.height_map_height};
+    }
+    if (h.format == BonnFormat::kPvf) {
+      j["pvf_header"] = h.pvf_legacy ? "legacy (301074)" : "current";
+      j["pvf_layout"] = h.pvf_images ? "stacked images" : "light fields";
+    }
+    if (h.format == BonnFormat::kBdi) {
+      j["compression"] = h.compression == 0 ? "full" : "sparse";
+      j["scan_lines_per_chunk"] = h.scan_lines_per_chunk;
+      j["stored_texels"] = h.stored_texels;
+    }
+    j["rotations"] = h.rotations.size();
+    j["cos_theta_i_included"] = h.cosine_flag;
+    j["stored_conventions"] = {
+        {"cosine_flag", h.cosine_flag},
+        {"values", h.cosine_flag ? "BRDF x cos(theta_i) as stored (not divided out)" : "as stored"},
+        {"texture_rows", "file row y = dataset row y (y = 0 first, not flipped)"},
+        {"epsilon", kBonnEpsilon},
+        {"clamping", "none"},
+        {"units", "relative (rgb_scale_factor and ppmm not applied)"}};
+    if (h.has_meta)
+      j["meta"] = {{"version", h.meta_version},
+                   {"measurement_setup", h.measurement_setup},
+                   {"image_sensor", h.image_sensor},
+                   {"light_source", h.light_source},
+                   {"ppmm", h.ppmm},
+                   {"rgb_scale_factor", h.rgb_scale_factor},
+                   {"xml_bytes", h.xml.size()}};
+    j["color_space"] = h.Info().color_space;
+    j["units"] = "relative";
+    j["file_bytes"] = h.file_bytes;
+  }
+  if (with_stats) j["values"] = ComputeValueStats(*OpenBonnSource(path), reporter).ToJson();
+  return j;
+}
+
+void BdiWriteOptions::Check() const {
+  BTF_CHECK_OPTION(scan_lines_per_chunk >= 1, "scan_lines_per_chunk", "must be at least 1");
+  BTF_CHECK_OPTION(measurement_setup.size() < 80, "measurement_setup", "must be shorter than 80 bytes");
+}
+
+namespace {
+
+class ByteWriter {
+ public:
+  template <typename T>
+  void Put(T v) {
+    const auto* p = reinterpret_cast<const char*>(&v);
+    bytes.insert(bytes.end(), p, p + sizeof v);
+  }
+  void Chars(const std::string& s, std::size_t n) {
+    for (std::size_t i = 0; i < n; ++i) bytes.push_back(i < s.size() ? s[i] : '\0');
+  }
+  std::vector<char> bytes;
+};
+
+void WriteAllAt(int fd, const char* p, std::size_t n, std::uint64_t offset, const std::string& path) {
+  while (n > 0) {
+    const ssize_t w = ::pwrite(fd, p, n, off_t(offset));
+    if (w < 0 && errno == EINTR) continue;
+    if (w <= 0) ThrowIo("cannot write '{}': {}", path, w < 0 ? std::strerror(errno) : "no progress");
+    p += w;
+    n -= std::size_t(w);
+    offset += std::uint64_t(w);
+  }
+}
+
+}  // namespace
+
+std::string EncodeBonnMetaAndSampling(const Sampling& views, const Sampling& lights, const DatasetInfo& info,
+                                      const std::string& measurement_setup) {
+  if (measurement_setup.size() >= 80) ThrowUsage("measurement_setup '{}' must be shorter than 80 bytes", measurement_setup);
+  ByteWriter meta;
+  meta.Put<std::uint32_t>(0);  // struct_size, patched below
+  meta.Put<std::uint32_t>(4);
+  meta.Chars(measurement_setup, 80);
+  meta.Chars("", 80);
+  meta.Chars("", 80);
+  meta.Put<float>(info.texel_size_mm > 0 ? float(1.0 / info.texel_size_mm) : 0.0f);
+  for (int i = 0; i < 3; ++i) meta.Put<float>(1.0f);
+  meta.Put<std::uint32_t>(info.cos_theta_i_included ? 1 : 0);
+  meta.Put<std::uint32_t>(0);  // no XML
+  meta.Put<std::uint32_t>(std::uint32_t(info.channel_names.size()));
+  for (const auto& name : info.channel_names) {
+    meta.Put<std::uint32_t>(std::uint32_t(name.size()));
+    meta.Chars(name, name.size());
+  }
+  const auto meta_size = std::uint32_t(meta.bytes.size());
+  std::memcpy(meta.bytes.data(), &meta_size, 4);
+  ByteWriter& b = meta;
+  b.Put<std::uint32_t>(std::uint32_t(views.size()));
+  for (int v = 0; v < views.size(); ++v) {
+    const Angles a = views.angles(v);
+    b.Put<float>(float(a.theta));
+    b.Put<float>(float(a.phi));
+    b.Put<std::uint32_t>(std::uint32_t(lights.size()));
+    for (int l = 0; l < lights.size(); ++l) {
+      const Angles al = lights.angles(l);
+      b.Put<float>(float(al.theta));
+      b.Put<float>(float(al.phi));
+    }
+  }
+  return std::string(b.bytes.begin(), b.bytes.end());
+}
+
+std::uint64_t WriteBdi(const std::filesystem::path& path, const SlotSource& source, const BdiWriteOptions& options,
+                       const Reporter& reporter) {
+  options.Check();
+  const int nv = source.views().size(), nl = source.lights().size(), nc = source.channels();
+  const int w = source.width(), h = source.height();
+  const DatasetInfo info = source.info();
+  if (int(info.channel_names.size()) != nc)
+    ThrowBadInput("'{}' has {} channels but {} channel names", source.name(), nc, info.channel_names.size());
+  ByteWriter b;
+  b.Chars("!BDIF06R2!", 10);
+  const std::string head = EncodeBonnMetaAndSampling(source.views(), source.lights(), info, options.measurement_setup);
+  b.bytes.insert(b.bytes.end(), head.begin(), head.end());
+  b.Put<std::uint32_t>(std::uint32_t(w));
+  b.Put<std::uint32_t>(std::uint32_t(h));
+  b.Put<std::uint32_t>(std::uint32_t(options.scan_lines_per_chunk));
+  b.Put<std::uint8_t>(2);  // sparse, with a full mask: the form btflib reads
+  b.bytes.insert(b.bytes.end(), std::size_t(w) * h, char(1));
+  b.Put<std::uint32_t>(0);  // no rotations
+  const std::uint64_t texels = std::uint64_t(w) * h, part = std::uint64_t(nl) * nc;
+  const std::uint64_t abrdf_bytes = 2ull * nv * part;
+  const std::uint64_t per_chunk = std::uint64_t(w) * options.scan_lines_per_chunk;
+  const std::uint64_t chunks = (texels + per_chunk - 1) / per_chunk;
+  if (double(per_chunk) * double(abrdf_bytes) > 4294967295.0)
+    ThrowUsage("a BDI chunk of {} scan lines of '{}' needs more than 4 GiB (its size field is 32-bit): use fewer scan "
+               "lines per chunk",
+               options.scan_lines_per_chunk, source.name());
+  const std::uint64_t data_begin = b.bytes.size();
+  const std::uint64_t total = data_begin + chunks * 4 + texels * abrdf_bytes;
+
+  AtomicOutput out(path);
+  out.Reserve();
+  const int fd = ::open(out.temp_path().c_str(), O_WRONLY | O_CLOEXEC);
+  if (fd < 0) ThrowIo("cannot write '{}': {}", path.string(), std::strerror(errno));
+  struct Closer {
+    int fd;
+    ~Closer() {
+      if (fd >= 0) ::close(fd);
+    }
+  } closer{fd};
+  if (::ftruncate(fd, off_t(total)) != 0)
+    ThrowIo("cannot write '{}' ({} bytes): {}", path.string(), total, std::strerror(errno));
+  WriteAllAt(fd, b.bytes.data(), b.bytes.size(), 0, path.string());
+  auto abrdf_offset = [&](std::uint64_t t) {
+    const std::uint64_t chunk = t / per_chunk;
+    return data_begin + (chunk + 1) * 4 + t * abrdf_bytes;
+  };
+  for (std::uint64_t i = 0; i < chunks; ++i) {
+    const std::uint64_t n = std::min(per_chunk, texels - i * per_chunk);
+    const auto size = std::uint32_t(n * abrdf_bytes);
+    WriteAllAt(fd, reinterpret_cast<const char*>(&size), 4, abrdf_offset(i * per_chunk) - 4, path.string());
+  }
+  std::vector<float> slot(source.slot_size());
+  std::vector<std::uint16_t> buf(part);
+  const std::size_t image = source.image_size();
+  for (int v = 0; v < nv; ++v) {
+    source.ReadViewSlot(v, slot.data());
+    CheckFiniteSlot(source, v, slot.data());
+    for (std::uint64_t t = 0; t < texels; ++t) {
+      for (int l = 0; l < nl; ++l)
+        for (int c = 0; c < nc; ++c) {
+          const float x = slot[std::size_t(l) * image + t * nc + c];
+          if (std::abs(x) > kHalfMax)
+            ThrowBadInput("'{}' holds {} at view {}, light {}, texel (y {}, x {}), channel {}: BDI stores half floats "
+                          "(|x| <= 65504); scale the data or keep it in a float32 dataset",
+                          source.name(), x, v, l, t / w, t % w, c);
+          buf[std::size_t(l) * nc + c] = FloatToHalf(x);
+        }
+      WriteAllAt(fd, reinterpret_cast<const char*>(buf.data()), part * 2, abrdf_offset(t) + std::uint64_t(v) * part * 2,
+                 path.string());
+    }
+    reporter.Progress(std::size_t(v + 1), std::size_t(nv), "writing BDI");
+  }
+  if (::close(fd) != 0) {
+    closer.fd = -1;
+    ThrowIo("cannot write '{}': {}", path.string(), std::strerror(errno));
+  }
+  closer.fd = -1;
+  out.Commit();
+  return total;
+}
+
+}  // namespace btf

@@ -1,0 +1,61 @@
+#pragma once
+// IEEE 754 binary16 ("half") <-> float32, bit exact and independent of the compiler's _Float16.
+// FloatToHalf rounds to nearest, ties to even (the rounding HDF5 uses for our float16 storage);
+// values beyond the half range become +-infinity, NaN stays NaN (quiet).
+#include <bit>
+#include <cstdint>
+
+namespace btf {
+
+inline float HalfToFloat(std::uint16_t h) {
+  const std::uint32_t sign = std::uint32_t(h & 0x8000u) << 16;
+  const std::uint32_t exponent = (h >> 10) & 0x1fu;
+  std::uint32_t mantissa = h & 0x3ffu;
+  std::uint32_t bits;
+  if (exponent == 0x1f) {
+    bits = sign | 0x7f800000u | (mantissa << 13);  // Inf / NaN
+  } else if (exponent != 0) {
+    bits = sign | ((exponent + 112u) << 23) | (mantissa << 13);
+  } else if (mantissa == 0) {
+    bits = sign;  // +-0
+  } else {
+    // Subnormal half: normalise into a float32 normal.
+    int e = -1;
+    do {
+      ++e;
+      mantissa <<= 1;
+    } while ((mantissa & 0x400u) == 0);
+    bits = sign | (std::uint32_t(112 - e) << 23) | ((mantissa & 0x3ffu) << 13);
+  }
+  return std::bit_cast<float>(bits);
+}
+
+inline std::uint16_t FloatToHalf(float f) {
+  const std::uint32_t x = std::bit_cast<std::uint32_t>(f);
+  const std::uint16_t sign = std::uint16_t((x >> 16) & 0x8000u);
+  const std::uint32_t abs = x & 0x7fffffffu;
+  if (abs >= 0x7f800000u)  // Inf or NaN (NaN keeps a quiet payload bit)
+    return std::uint16_t(sign | 0x7c00u | (abs > 0x7f800000u ? 0x200u : 0u));
+  if (abs >= 0x477ff000u) return std::uint16_t(sign | 0x7c00u);  // rounds past 65504: infinity
+  if (abs < 0x38800000u) {
+    // Result is subnormal (or zero): value = abs_float / 2^-24, rounded to nearest even.
+    if (abs < 0x33000000u) return sign;  // below half the smallest subnormal: +-0
+    const std::uint32_t mant = (abs & 0x7fffffu) | 0x800000u;
+    const int shift = 126 - int(abs >> 23);  // value / 2^-24 = mant * 2^(exponent - 126)
+    const std::uint32_t value = mant >> shift;
+    const std::uint32_t rest = mant & ((1u << shift) - 1u), halfway = 1u << (shift - 1);
+    const std::uint32_t rounded = value + ((rest > halfway || (rest == halfway && (value & 1u))) ? 1u : 0u);
+    return std::uint16_t(sign | rounded);
+  }
+  // Normal: rebias the exponent, round the 13 dropped mantissa bits to nearest even (a carry
+  // into the exponent is the correct result).
+  const std::uint32_t rebased = abs - 0x38000000u;
+  const std::uint32_t value = rebased >> 13, rest = rebased & 0x1fffu;
+  const std::uint32_t rounded = value + ((rest > 0x1000u || (rest == 0x1000u && (value & 1u))) ? 1u : 0u);
+  return std::uint16_t(sign | rounded);
+}
+
+// The largest finite half.
+inline constexpr float kHalfMax = 65504.0f;
+
+}  // namespace btf

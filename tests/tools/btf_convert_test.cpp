@@ -1,0 +1,128 @@
+// A Bonn .btf file through the tools: btf-convert, btf-info, btf-compress and btf-eval (CLI).
+#include <gtest/gtest.h>
+
+#include <filesystem>
+
+#include <nlohmann/json.hpp>
+
+#include "libbtf/io/bonn.h"
+#include "libbtf/io/dataset_io.h"
+#include "libbtf/io/half.h"
+#include "libbtf/io/slot_source.h"
+#include "tests/io/bonn_test.h"
+#include "tests/test_util.h"
+
+namespace btf {
+namespace {
+
+TEST(BtfConvert, DatasetToBdiThroughInfoCompressEvalAndBack) {
+  const auto dir = test::TempDir();
+  const std::string d = dir.string() + "/";
+  Dataset ds = test::MakeTestDataset(3, 4, 6, 5);
+  ds.info().cos_theta_i_included = true;
+  WriteDataset(dir / "a.h5", ds);
+  std::string out;
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-convert") + " " + d + "a.h5 -o " + d + "a.btf --json --quiet", &out), 0);
+  auto j = nlohmann::json::parse(out);
+  EXPECT_EQ(j["output_format"], "bdi");
+  EXPECT_EQ(j["input_kind"], "libbtf-dataset");
+  EXPECT_EQ(j["bytes_written"], std::filesystem::file_size(dir / "a.btf"));
+
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-info") + " --json --quiet " + d + "a.btf", &out), 0);
+  j = nlohmann::json::parse(out);
+  EXPECT_EQ(j["format"], "bonn-bdi");
+  EXPECT_EQ(j["signature"], "!BDIF06R2!");
+  EXPECT_EQ(j["shape"]["views"], 3);
+  EXPECT_EQ(j["shape"]["lights"], 4);
+  EXPECT_EQ(j["shape"]["height"], 6);
+  EXPECT_EQ(j["shape"]["width"], 5);
+  EXPECT_EQ(j["cos_theta_i_included"], true);
+  EXPECT_EQ(j["stored_conventions"]["epsilon"], 1e-5);
+  EXPECT_EQ(j["values"]["count"], 3 * 4 * 6 * 5 * 3);
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-info") + " " + d + "a.btf", &out), 0);  // the text summary
+  EXPECT_NE(out.find("bonn-bdi"), std::string::npos);
+
+  // btf-compress reads the .btf file slot by slot; btf-eval compares the codec against it.
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-compress") + " " + d + "a.btf --method pca-view -c 4 -o " + d +
+                             "c.h5 --quiet >/dev/null"),
+            0);
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-eval") + " compare " + d + "a.btf " + d + "c.h5 --json --quiet", &out), 0);
+  EXPECT_TRUE(nlohmann::json::parse(out).contains("seconds"));
+  // DFMF with every component (12 per YUV channel): compared with the input by btf-eval.
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-convert") + " " + d + "a.btf -o " + d + "d.btf --to dfmf -c 100 --quiet >/dev/null"), 0);
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-eval") + " compare " + d + "a.btf " + d + "d.btf --json --quiet", &out), 0);
+  j = nlohmann::json::parse(out);
+  ASSERT_TRUE(j["rel_l2"].is_number()) << out;
+  EXPECT_LT(j["rel_l2"].get<double>(), 1e-4);  // the YUV inverse's 5-6 digits (docs/format.md)
+  // The pca-view codec as PVF: btf-info reads it back.
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-convert") + " " + d + "c.h5 -o " + d + "c.btf --to pvf --quiet >/dev/null"), 0);
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-info") + " --json --quiet --no-stats " + d + "c.btf", &out), 0);
+  j = nlohmann::json::parse(out);
+  EXPECT_EQ(j["format"], "bonn-pvf");
+  EXPECT_EQ(j["pvf_layout"], "stacked images");
+
+  // Back to a dataset: the half-rounded input, exactly.
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-convert") + " " + d + "a.btf -o " + d + "b.h5 --quiet >/dev/null"), 0);
+  const Dataset back = ReadDataset(dir / "b.h5");
+  ASSERT_EQ(back.size(), ds.size());
+  for (std::size_t i = 0; i < ds.size(); ++i) ASSERT_EQ(back.data()[i], HalfToFloat(FloatToHalf(ds.data()[i])));
+  EXPECT_TRUE(back.info().cos_theta_i_included);
+}
+
+TEST(BtfConvert, HandBuiltDfmfInBtfInfo) {
+  const auto dir = test::TempDir();
+  test::Layout L;
+  test::Bytes f;
+  f.Text("!DFMF08FCR").Append(test::CommonHeader(L, true)).U32(1).I32(11);
+  for (int i = 0; i < 12; ++i) f.F32(0);
+  for (int c = 0; c < 3; ++c) {
+    f.U8(2).U32(1).U32(std::uint32_t(L.views * L.lights)).U32(std::uint32_t(L.texels())).U16(0x3c00);
+    for (int i = 0; i < L.views * L.lights + L.texels(); ++i) f.U16(0x3800);  // 0.5
+  }
+  f.Save(dir / "m.btf");
+  std::string out;
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-info") + " --json --quiet " + (dir / "m.btf").string(), &out), 0);
+  const auto j = nlohmann::json::parse(out);
+  EXPECT_EQ(j["format"], "bonn-dfmf");
+  EXPECT_EQ(j["color_model"]["id"], 11);
+  EXPECT_EQ(j["color_model"]["name"], "ylog_udivy_vdivy");
+  EXPECT_EQ(j["components"], (std::vector<int>{1, 1, 1}));
+  EXPECT_EQ(j["scalar_sizes"], (std::vector<int>{2, 2, 2}));
+  // Y' = U' = V' = 0.25: Y = e^0.25 - 1e-5, U = V = 0.25 (Y + 1e-5); R = Y + 1.13983 V.
+  const double y = std::exp(0.25) - 1e-5, v = 0.25 * (y + 1e-5);
+  EXPECT_NEAR(j["values"]["max"].get<double>(), y + 2.03211 * v, 1e-6);
+}
+
+TEST(BtfConvert, BadInputAndUsageExitCodesWriteNothing) {
+  const auto dir = test::TempDir();
+  const std::string d = dir.string() + "/", tool = test::Tool("btf-convert");
+  const Dataset ds = test::MakeTestDataset(2, 2, 2, 2);
+  WriteDataset(dir / "a.h5", ds);
+  WriteBdi(dir / "a.btf", *MemorySource(ds));
+  // Truncated .btf: exit 3, one line naming the file, no output.
+  std::filesystem::copy_file(dir / "a.btf", dir / "cut.btf");
+  std::filesystem::resize_file(dir / "cut.btf", std::filesystem::file_size(dir / "a.btf") - 3);
+  std::string err;
+  EXPECT_EQ(test::RunCommand(tool + " " + d + "cut.btf -o " + d + "out.h5 2>&1", &err), 3);
+  EXPECT_NE(err.find("cut.btf"), std::string::npos) << err;
+  EXPECT_NE(err.find("byte"), std::string::npos) << err;
+  EXPECT_EQ(std::count(err.begin(), err.end(), '\n'), 1) << err;
+  EXPECT_FALSE(std::filesystem::exists(dir / "out.h5"));
+  // Unknown signature: exit 3 (the library tests cover every other malformed field).
+  test::Bytes().Text("!NOPE0000!").U32(1).Save(dir / "sig.btf");
+  EXPECT_EQ(test::RunCommand(tool + " " + d + "sig.btf -o " + d + "out.h5 2>/dev/null"), 3);
+  // Usage: an extension that names no format, a format not written yet (option values:
+  // tests/io BonnConvert.OptionsAndTargets).
+  EXPECT_EQ(test::RunCommand(tool + " " + d + "a.h5 -o " + d + "out.txt 2>/dev/null"), 2);
+  EXPECT_EQ(test::RunCommand(tool + " " + d + "a.h5 -o " + d + "out.btf --to svd 2>/dev/null"), 2);
+  // PVF is written from a pca-view codec only: a dataset is the wrong input (exit 3).
+  EXPECT_EQ(test::RunCommand(tool + " " + d + "a.h5 -o " + d + "out.btf --to pvf 2>/dev/null"), 3);
+  EXPECT_EQ(test::RunCommand(tool + " " + d + "none.btf -o " + d + "out.h5 2>/dev/null"), 4);
+  for (const char* name : {"out.h5", "out.txt", "out.btf"}) EXPECT_FALSE(std::filesystem::exists(dir / name)) << name;
+  // --to overrides the extension.
+  ASSERT_EQ(test::RunCommand(tool + " " + d + "a.btf -o " + d + "x.data --to dataset --quiet"), 0);
+  EXPECT_EQ(ReadDataset(dir / "x.data").num_views(), 2);
+}
+
+}  // namespace
+}  // namespace btf

@@ -1,0 +1,65 @@
+// btf-convert INPUT -o OUTPUT [--to dataset|bdi|fmf|dfmf|pvf]: any readable BTF (libbtf dataset or codec, Bonn
+// .btf) to a libbtf dataset or a Bonn BDI file, one view slot at a time (docs/btf-convert.md).
+#include "libbtf/compress/bonn_fmf.h"
+#include "libbtf/compress/bonn_pvf.h"
+#include "libbtf/compress/codec_source.h"
+#include "libbtf/core/atomic_file.h"
+#include "libbtf/io/convert.h"
+#include "tools/common/cli.h"
+
+namespace {
+
+struct ConvertFlags {
+  std::string input, output;
+  btf::ConvertOptions options;
+  btf::FmfWriteOptions fmf;
+};
+
+int RunConvert(const CLI::App& app, const btf::cli::CommonFlags& common, const ConvertFlags& f) {
+  // Options and the output format are checked before the input is read.
+  const std::string target = btf::ConvertTarget(f.options, f.output);
+  if (target == "fmf" || target == "dfmf") {
+    btf::FmfWriteOptions o = f.fmf;
+    o.decorrelate = target == "dfmf";
+    o.Check();
+    const auto input = btf::OpenSource(f.input);
+    btf::cli::PrintSummary(app, common, btf::WriteFmf(o, *input, f.output, btf::cli::MakeReporter(common)));
+    return 0;
+  }
+  if (target == "pvf") {
+    // PVF stores a per-view PCA: written from a pca-view codec's factors, not re-factorised.
+    const btf::Codec codec = btf::ReadCodec(f.input);
+    btf::cli::PrintSummary(app, common, btf::WritePvf(codec, f.input, f.output, btf::cli::MakeReporter(common)));
+    return 0;
+  }
+  const auto input = btf::OpenSource(f.input);
+  const btf::ConvertSummary s = btf::Convert(f.options, *input, f.output, btf::cli::MakeReporter(common));
+  btf::cli::PrintSummary(app, common, s);
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"Convert a BTF between formats: libbtf dataset or codec, or Bonn .btf (BDI, DFMF, FMF, PVF) in; libbtf "
+               "dataset or Bonn BDI out. Reads and writes one view slot at a time.",
+               "btf-convert"};
+  btf::cli::Configure(app);
+  btf::cli::CommonFlags common;
+  ConvertFlags f;
+  btf::ConvertOptions& o = f.options;
+  app.add_option("INPUT", f.input, "Input: dataset (.h5), codec (.h5) or Bonn .btf file")->required();
+  app.add_option("-o,--output", f.output, "Output file (.h5 = dataset, .btf = BDI unless --to)")->required();
+  app.add_option("--to", o.to,
+                 "Output format: dataset | bdi | fmf | dfmf | pvf (pvf from a pca-view codec; default: from the output's "
+                 "extension)");
+  app.add_option("--storage", o.storage, "Dataset output: float32 | float16");
+  app.add_option("--deflate-level", o.deflate_level, "Dataset output: deflate level 0-9 (0 = none)");
+  app.add_option("--scan-lines", o.scan_lines_per_chunk, "BDI output: texture rows per chunk");
+  app.add_option("--components,-c", f.fmf.components,
+                 "FMF/DFMF output: components of the truncated SVD (per YUV channel for DFMF); clamped to the rank");
+  app.add_option("--power-iterations", f.fmf.power_iterations, "FMF/DFMF output: power iterations of the randomised SVD");
+  app.add_option("--seed", f.fmf.seed, "FMF/DFMF output: seed of the randomised SVD");
+  btf::cli::AddCommonFlags(app, common);
+  return btf::cli::Main(argc, argv, app, [&] { return RunConvert(app, common, f); });
+}
