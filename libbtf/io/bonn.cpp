@@ -877,7 +877,7 @@ void WriteAllAt(int fd, const char* p, std::size_t n, std::uint64_t offset, cons
   while (n > 0) {
     const ssize_t w = ::pwrite(fd, p, n, off_t(offset));
     if (w < 0 && errno == EINTR) continue;
-    if (w <= 0) ThrowIo("cannot write '{}': {}", path, w < 0 ? std::strerror(errno) : "no progress");
+    if (w <= 0) ThrowIo("cannot write '{}' ({}): disk full or I/O error?", path, w < 0 ? std::strerror(errno) : "no progress");
     p += w;
     n -= std::size_t(w);
     offset += std::uint64_t(w);
@@ -954,7 +954,7 @@ std::uint64_t WriteBdi(const std::filesystem::path& path, const SlotSource& sour
   AtomicOutput out(path);
   out.Reserve();
   const int fd = ::open(out.temp_path().c_str(), O_WRONLY | O_CLOEXEC);
-  if (fd < 0) ThrowIo("cannot write '{}': {}", path.string(), std::strerror(errno));
+  if (fd < 0) ThrowIo("cannot write '{}' ({}): disk full or I/O error?", path.string(), std::strerror(errno));
   struct Closer {
     int fd;
     ~Closer() {
@@ -962,7 +962,7 @@ std::uint64_t WriteBdi(const std::filesystem::path& path, const SlotSource& sour
     }
   } closer{fd};
   if (::ftruncate(fd, off_t(total)) != 0)
-    ThrowIo("cannot write '{}' ({} bytes): {}", path.string(), total, std::strerror(errno));
+    ThrowIo("cannot write '{}' ({} bytes, {}): disk full or I/O error?", path.string(), total, std::strerror(errno));
   WriteAllAt(fd, b.bytes.data(), b.bytes.size(), 0, path.string());
   auto abrdf_offset = [&](std::uint64_t t) {
     const std::uint64_t chunk = t / per_chunk;
@@ -996,7 +996,7 @@ std::uint64_t WriteBdi(const std::filesystem::path& path, const SlotSource& sour
   }
   if (::close(fd) != 0) {
     closer.fd = -1;
-    ThrowIo("cannot write '{}': {}", path.string(), std::strerror(errno));
+    ThrowIo("cannot write '{}' ({}): disk full or I/O error?", path.string(), std::strerror(errno));
   }
   closer.fd = -1;
   out.Commit();

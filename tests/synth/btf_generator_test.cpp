@@ -45,7 +45,9 @@ TEST(BtfGenerator, ErrorStaysWithinTheStratifiedBoundWhenWindowsDoNotAlign) {
     const double nb = test::BoundaryStrata(params, d, d) + 2 * grid;  // + the two interior window lines
     const double tol = 6 * std::sqrt(nb) / (2.0 * grid * grid);
     EXPECT_LT(std::abs(mean - f[0]) / spec, tol) << "samples " << s;
-    if (s == 9) EXPECT_LT(tol, 0.02);  // the bound itself is tight enough to mean something
+    if (s == 9) {
+      EXPECT_LT(tol, 0.02);  // the bound itself is tight enough to mean something
+    }
   }
 }
 

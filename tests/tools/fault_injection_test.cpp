@@ -128,7 +128,8 @@ TEST_P(FaultInjection, EveryFaultExitsFourAndKeepsTheOldOutput) {
 }
 
 const std::string kSynth = test::Tool("btf-synth"), kCompress = test::Tool("btf-compress"),
-                  kRegister = test::Tool("btf-register"), kEval = test::Tool("btf-eval");
+                  kRegister = test::Tool("btf-register"), kEval = test::Tool("btf-eval"),
+                  kConvert = test::Tool("btf-convert");
 const std::string kSmallBtf = kSynth + " btf --views 0,1,7 --lights 0,3,9 --resolution 8 --samples 1";
 
 INSTANTIATE_TEST_SUITE_P(
@@ -152,6 +153,14 @@ INSTANTIATE_TEST_SUITE_P(
         ToolCase{"export",
                  {kSmallBtf + " -o {in}/d.h5", kCompress + " {in}/d.h5 --method lpca --clusters 2 --components 2 -o {in}/c.h5"},
                  kCompress + " export {in}/c.h5 --format schneider --view-grid 4 --light-grid 4 -o {out}/export"},
+        ToolCase{"convert_to_bdi", {kSmallBtf + " -o {in}/d.h5"}, kConvert + " {in}/d.h5 --to bdi -o {out}/x.btf"},
+        ToolCase{"convert_to_dfmf", {kSmallBtf + " -o {in}/d.h5"},
+                 kConvert + " {in}/d.h5 --to dfmf -c 2 -o {out}/x.btf"},
+        ToolCase{"convert_to_pvf",
+                 {kSmallBtf + " -o {in}/d.h5", kCompress + " {in}/d.h5 --method pca-view --components 2 -o {in}/c.h5"},
+                 kConvert + " {in}/c.h5 --to pvf -o {out}/x.btf"},
+        ToolCase{"convert_from_bdi", {kSmallBtf + " -o {in}/d.h5", kConvert + " {in}/d.h5 --to bdi -o {in}/x.btf"},
+                 kConvert + " {in}/x.btf -o {out}/d.h5"},
         ToolCase{"sweep", {kSmallBtf + " -o {in}/d.h5"},
                  kEval + " sweep {in}/d.h5 --methods pca-view --components 1,2 --runs 1 --render-size 64 -o {out}/sweep"}),
     [](const auto& info) { return info.param.name; });

@@ -91,6 +91,9 @@ TEST_F(FullDisk, EveryOtherWritingToolExitsFourAndKeepsTheOldOutput) {
                          "--resolution 32 -o " + (mnt_ / "r.h5").string(),
                      mnt_ / "r.h5");
   ExpectCleanFailure(comp + " export " + codec + " -o " + (mnt_ / "export").string(), mnt_ / "export", "manifest.json");
+  ExpectCleanFailure(test::Tool("btf-convert") + " " + data + " --to bdi -o " + (mnt_ / "x.btf").string(), mnt_ / "x.btf");
+  ExpectCleanFailure(test::Tool("btf-convert") + " " + data + " --to dfmf -c 8 -o " + (mnt_ / "y.btf").string(),
+                     mnt_ / "y.btf");
   ExpectCleanFailure(test::Tool("btf-eval") + " sweep " + data + " --methods pca-view --components 1,2 --runs 1 -o " +
                          (mnt_ / "sweep").string(),
                      mnt_ / "sweep", "results.json");
