@@ -7,12 +7,14 @@
 #include <cstring>
 #include <ctime>
 #include <mutex>
+#include <type_traits>
 
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include "libbtf/core/dataset.h"
 #include "libbtf/core/error.h"
+#include "libbtf/io/half.h"
 
 namespace btf::h5 {
 
@@ -90,6 +92,30 @@ hid_t HalfType() {
   }();
   return type;
 }
+
+namespace {
+// float16 storage is converted by libbtf (io/half.h: IEEE 754 round to nearest, ties to even),
+// never by HDF5: HDF5 1.10.8's float32 -> float16 conversion truncates results in the half
+// subnormal range and drops the carry when rounding up reaches the next power of two (3.99956 is
+// stored as 2). The data are written and read as raw half bits, so HDF5 converts nothing.
+std::vector<std::uint16_t> ToHalf(const float* data, std::size_t n) {
+  std::vector<std::uint16_t> h(n);
+  for (std::size_t i = 0; i < n; ++i) h[i] = FloatToHalf(data[i]);
+  return h;
+}
+void FromHalf(const std::vector<std::uint16_t>& h, float* out) {
+  for (std::size_t i = 0; i < h.size(); ++i) out[i] = HalfToFloat(h[i]);
+}
+bool StoredAsHalf(hid_t ds) {
+  Handle type(H5Dget_type(ds));
+  return H5Tget_class(type.id()) == H5T_FLOAT && H5Tget_size(type.id()) == 2;
+}
+std::size_t Elements(const std::vector<hsize_t>& dims) {
+  std::size_t n = 1;
+  for (auto d : dims) n *= static_cast<std::size_t>(d);
+  return n;
+}
+}  // namespace
 
 int MajorVersion(const std::string& semver) {
   std::size_t pos = 0;
@@ -339,8 +365,12 @@ void File::WriteDoubles(const std::string& name, const std::vector<hsize_t>& dim
 }
 void File::WriteFloats(const std::string& name, const std::vector<hsize_t>& dims, const float* data, Storage storage,
                        const std::vector<hsize_t>& chunk) const {
-  WriteWhole(*this, name, dims, storage == Storage::kFloat16 ? HalfType() : H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, data,
-             chunk);
+  if (storage == Storage::kFloat16) {
+    const auto half = ToHalf(data, Elements(dims));
+    WriteWhole(*this, name, dims, HalfType(), HalfType(), half.data(), chunk);
+  } else {
+    WriteWhole(*this, name, dims, H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, data, chunk);
+  }
 }
 void File::WriteInts(const std::string& name, const std::vector<hsize_t>& dims, const std::int32_t* data) const {
   WriteWhole(*this, name, dims, H5T_STD_I32LE, H5T_NATIVE_INT32, data);
@@ -377,6 +407,15 @@ std::vector<T> ReadWhole(const File& f, const std::string& name, hid_t mem_type,
   if (cls != want_class && !(want_class == H5T_FLOAT && cls == H5T_INTEGER))
     ThrowBadInput("'{}': dataset '{}' has the wrong element type", f.path(), name);
   std::vector<T> out(n);
+  if constexpr (std::is_same_v<T, float>) {
+    if (StoredAsHalf(ds.id())) {
+      std::vector<std::uint16_t> half(n);
+      if (n > 0 && H5Dread(ds.id(), HalfType(), H5S_ALL, H5S_ALL, H5P_DEFAULT, half.data()) < 0)
+        ThrowUnreadable(f.path(), fmt::format("dataset '{}'", name));
+      FromHalf(half, out.data());
+      return out;
+    }
+  }
   if (n > 0 && H5Dread(ds.id(), mem_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, out.data()) < 0)
     ThrowUnreadable(f.path(), fmt::format("dataset '{}'", name));
   return out;
@@ -431,8 +470,14 @@ void File::WriteSlab(const std::string& name, const std::vector<hsize_t>& offset
   Handle ds = OpenDataset(name);
   Handle fspace = SelectSlab(*this, ds.id(), name, offset, count);
   Handle mspace(H5Screate_simple(static_cast<int>(count.size()), count.data(), nullptr));
-  if (H5Dwrite(ds.id(), H5T_NATIVE_FLOAT, mspace.id(), fspace.id(), H5P_DEFAULT, data) < 0)
-    ThrowIo("'{}': cannot write to '{}' (disk full?)", path_, name);
+  herr_t status;
+  if (StoredAsHalf(ds.id())) {
+    const auto half = ToHalf(data, Elements(count));
+    status = H5Dwrite(ds.id(), HalfType(), mspace.id(), fspace.id(), H5P_DEFAULT, half.data());
+  } else {
+    status = H5Dwrite(ds.id(), H5T_NATIVE_FLOAT, mspace.id(), fspace.id(), H5P_DEFAULT, data);
+  }
+  if (status < 0) ThrowIo("'{}': cannot write to '{}' (disk full?)", path_, name);
 }
 
 void File::ReadSlab(const std::string& name, const std::vector<hsize_t>& offset, const std::vector<hsize_t>& count,
@@ -440,8 +485,15 @@ void File::ReadSlab(const std::string& name, const std::vector<hsize_t>& offset,
   Handle ds = OpenDataset(name);
   Handle fspace = SelectSlab(*this, ds.id(), name, offset, count);
   Handle mspace(H5Screate_simple(static_cast<int>(count.size()), count.data(), nullptr));
-  if (H5Dread(ds.id(), H5T_NATIVE_FLOAT, mspace.id(), fspace.id(), H5P_DEFAULT, data) < 0)
-    ThrowUnreadable(path_, fmt::format("dataset '{}'", name));
+  herr_t status;
+  if (StoredAsHalf(ds.id())) {
+    std::vector<std::uint16_t> half(Elements(count));
+    status = H5Dread(ds.id(), HalfType(), mspace.id(), fspace.id(), H5P_DEFAULT, half.data());
+    if (status >= 0) FromHalf(half, data);
+  } else {
+    status = H5Dread(ds.id(), H5T_NATIVE_FLOAT, mspace.id(), fspace.id(), H5P_DEFAULT, data);
+  }
+  if (status < 0) ThrowUnreadable(path_, fmt::format("dataset '{}'", name));
 }
 
 std::string File::StorageOf(const std::string& name) const {
