@@ -184,6 +184,15 @@ TEST(HdrMerge, BadBracketsNameTheFilesAndWhatToDo) {
     EXPECT_EQ(e.code(), ExitCode::kBadInput);
     EXPECT_NE(std::string(e.what()).find("photos[0].brackets"), std::string::npos) << e.what();
   }
+  // btf-synth's bracket and response options are checked before any rendering (usage, exit 2).
+  for (const auto& [args, field] : {std::pair<std::string, std::string>{"--brackets 2", "brackets"},
+                                    {"--brackets 1,4 --format exr", "brackets"},
+                                    {"--response-gamma 2.2", "response-gamma"},
+                                    {"--response-gamma 2.2 --format png8 --response-bias 1", "response-bias"}}) {
+    EXPECT_EQ(test::RunCommand(test::Tool("btf-synth") + kScene + args + " -o " + (dir / "x").string() + " 2>&1", &out), 2)
+        << args << out;
+    EXPECT_NE(out.find("invalid option '" + field + "'"), std::string::npos) << args << out;
+  }
   // Response recovery needs 8-bit photos.
   EXPECT_EQ(test::RunCommand(test::Tool("btf-register") + " run --quiet " + (dir / "manifest.json").string() +
                                  " --hdr-response debevec -o " + (dir / "d.h5").string() + " 2>&1",
