@@ -501,8 +501,10 @@ class Registration {
         std::string files;
         for (const auto& b : entry.brackets) files += (files.empty() ? "'" : ", '") + b.file + "'";
         ThrowBadInput("{} of the {} texels of the sample are clipped in every exposure of the bracket ({}; stored "
-                      "value >= {} of full scale): add a shorter exposure",
-                      n, mask.pixels.size(), files, o_.hdr.saturation);
+                      "value >= {} of full scale{}): add a shorter exposure",
+                      n, mask.pixels.size(), files, o_.hdr.saturation,
+                      sum_.response.empty() ? "" : fmt::format(" or code > {}, the response curve's last constrained "
+                                                               "code", sum_.response.max_code));
       }
     }
     r.invalid_fraction = st.invalid_fraction;
