@@ -477,8 +477,27 @@ Manifest ReadManifest(const std::filesystem::path& path) {
   for (std::size_t i = 0; i < n; ++i) {
     const Node p = ps.At(i);
     PhotoEntry e;
-    e.file = p["file"].String();
-    if (e.file.empty()) p["file"].Fail("must name the photo file");
+    if (p.Has("brackets")) {  // several exposures of this (view, light): file and exposure per exposure
+      const Node bs = p["brackets"];
+      const std::size_t nb = bs.ArraySize();
+      if (nb < 2) bs.Fail(fmt::format("lists {} exposure(s): a bracket needs at least 2 (else give file and exposure)", nb));
+      for (std::size_t b = 0; b < nb; ++b) {
+        const Node x = bs.At(b);
+        BracketExposure be;
+        be.file = x["file"].String();
+        if (be.file.empty()) x["file"].Fail("must name the photo file");
+        be.exposure = x["exposure"].Double();
+        if (!(be.exposure > 0)) x["exposure"].Fail("must be > 0");
+        e.brackets.push_back(be);
+      }
+      e.file = e.brackets[0].file;
+      e.exposure = e.brackets[0].exposure;
+    } else {
+      e.file = p["file"].String();
+      if (e.file.empty()) p["file"].Fail("must name the photo file");
+      e.exposure = p["exposure"].Double();
+      if (!(e.exposure > 0)) p["exposure"].Fail("must be > 0");
+    }
     e.view_index = p["view_index"].Int();
     e.light_index = p["light_index"].Int();
     if (e.view_index < 0 || e.view_index >= m.views.size())
@@ -487,8 +506,6 @@ Manifest ReadManifest(const std::filesystem::path& path) {
       p["light_index"].Fail(fmt::format("{} is outside the light sampling (0..{})", e.light_index, m.lights.size() - 1));
     e.view_dir = p["view_dir"].UnitVector();
     e.light_dir = p["light_dir"].UnitVector();
-    e.exposure = p["exposure"].Double();
-    if (!(e.exposure > 0)) p["exposure"].Fail("must be > 0");
     e.light_intensity = p["light_intensity"].Double();
     if (!(e.light_intensity > 0)) p["light_intensity"].Fail("must be > 0");
     e.light_distance_mm = p.Has("light_distance_mm") ? p["light_distance_mm"].Double() : 0.0;
@@ -511,16 +528,22 @@ void WriteManifest(const std::filesystem::path& path, const Manifest& m) {
   j["pixel_value"] = "exposure * radiance; radiance = BTF(1/sr) * irradiance";
   json ps = json::array();
   for (const auto& e : m.photos) {
-    ps.push_back(json{{"file", e.file},
-                      {"view_index", e.view_index},
-                      {"light_index", e.light_index},
-                      {"view_dir", ToJson(e.view_dir)},
-                      {"light_dir", ToJson(e.light_dir)},
-                      {"exposure", e.exposure},
-                      {"light_intensity", e.light_intensity},
-                      {"light_distance_mm", e.light_distance_mm},
-                      {"camera_distance_mm", e.camera_distance_mm},
-                      {"camera", CameraToJson(e.camera)}});
+    json jp{{"view_index", e.view_index},
+            {"light_index", e.light_index},
+            {"view_dir", ToJson(e.view_dir)},
+            {"light_dir", ToJson(e.light_dir)},
+            {"light_intensity", e.light_intensity},
+            {"light_distance_mm", e.light_distance_mm},
+            {"camera_distance_mm", e.camera_distance_mm},
+            {"camera", CameraToJson(e.camera)}};
+    if (e.brackets.empty()) {
+      jp["file"] = e.file;
+      jp["exposure"] = e.exposure;
+    } else {
+      jp["brackets"] = json::array();
+      for (const auto& b : e.brackets) jp["brackets"].push_back(json{{"file", b.file}, {"exposure", b.exposure}});
+    }
+    ps.push_back(jp);
   }
   j["photos"] = ps;
   j["extra"] = m.extra;

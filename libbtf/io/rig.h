@@ -94,11 +94,19 @@ bool ProjectToPixel(const CameraModel& camera, const Eigen::Matrix3d& camera_fro
 Eigen::Matrix3d PlaneHomography(const CameraModel& camera, const Eigen::Matrix3d& camera_from_plate_rotation,
                                 const Vec3& camera_from_plate_translation, double plane_z = 0);
 
+// One exposure of an exposure bracket (several photos of the same view and light).
+struct BracketExposure {
+  std::string file;     // relative to the manifest's folder
+  double exposure = 1;  // as PhotoEntry::exposure: pixel value = exposure * radiance (clipped at full scale)
+};
+
 struct PhotoEntry {
-  std::string file;  // relative to the manifest's folder
+  std::string file;  // relative to the manifest's folder (a bracket: its first exposure's file)
   int view_index = -1, light_index = -1;
   Vec3 view_dir = Vec3::UnitZ(), light_dir = Vec3::UnitZ();  // unit vectors, plate frame
-  double exposure = 1;         // pixel value = exposure * radiance
+  double exposure = 1;         // pixel value = exposure * radiance (a bracket: its first exposure's)
+  std::vector<BracketExposure> brackets;  // empty = one photo (file, exposure); else >= 2 exposures of this
+                                          // (view, light), merged to radiance by btf-register (register/hdr.h)
   double light_intensity = 1;  // directional: irradiance at normal incidence; point: intensity (x 1/r^2 in mm^2)
   double light_distance_mm = 0;  // 0 = directional light, else point light at this distance from the origin
   double camera_distance_mm = 0;

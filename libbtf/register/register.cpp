@@ -124,6 +124,7 @@ void RegisterOptions::Check() const {
   tiles.Check();
   write.Check();
   input.Check();
+  hdr.Check();
   BTF_CHECK_OPTION(max_invalid_fraction >= 0 && max_invalid_fraction <= 1, "max_invalid_fraction", "0..1");
   BTF_CHECK_OPTION(tile_output == "tiling" || tile_output == "tile", "tile_output", "'tiling' or 'tile'");
   BTF_CHECK_OPTION(contact_sheet_thumb >= 0 && contact_sheet_thumb <= 1024, "contact_sheet_thumb", "0..1024");
@@ -155,6 +156,7 @@ json PhotoReport::ToJson() const {
       j["translation_mm"] = btf::ToJson(camera_from_plate_translation);
     }
   }
+  if (exposures > 1) j["bracket"] = {{"exposures", exposures}, {"clipped_pixels", hdr_clipped_pixels}};
   if (ok) {
     j["invalid_texel_fraction"] = invalid_fraction;
     j["max_texel_footprint_px"] = max_footprint_px;
@@ -181,6 +183,9 @@ json RegisterSummary::ToJson() const {
             {"filled", filled_j},
             {"seconds", times.ToJson()},
             {"photos", ph}};
+  if (!response.empty()) j["response_curve"] = {{"from", response_files},
+                            {"code_to_linear", response.lut},
+                            {"codes_constrained", {response.min_code, response.max_code}}};
   if (lattice) {
     j["lattice"] = lattice->ToJson();
     j["lattice"]["reference_view_index"] = reference_view;
@@ -232,6 +237,7 @@ class Registration {
                     (dir_ / manifest_.board_file).string());
     input_ = o_.input;
     if (input_.colorspace == "auto" && !manifest_.transfer.empty()) input_.colorspace = manifest_.transfer;
+    if (o_.hdr.response != "linear") RecoverResponseCurve();
     if (!o_.camera.empty()) {
       const CameraFile cf = ReadCameraFile(o_.camera);
       if (cf.model != "radtan")
@@ -342,9 +348,60 @@ class Registration {
   }
 
  private:
+  // The camera response from the first bracket of the manifest; every photo is then read as
+  // stored (raw codes) and mapped through it.
+  void RecoverResponseCurve() {
+    if (manifest_.bit_depth != 8)
+      ThrowBadInput("'{}': --hdr-response {} recovers the response of 8-bit photos; this manifest's bit_depth is {} "
+                    "(use --hdr-response linear for linear data)",
+                    manifest_path_.string(), o_.hdr.response, manifest_.bit_depth);
+    const auto first = std::find_if(manifest_.photos.begin(), manifest_.photos.end(),
+                                    [](const PhotoEntry& e) { return e.brackets.size() >= 2; });
+    if (first == manifest_.photos.end())
+      ThrowBadInput("'{}': --hdr-response {} needs an exposure bracket ('brackets' in a photo entry) to recover the "
+                    "response from; the manifest has none",
+                    manifest_path_.string(), o_.hdr.response);
+    input_.colorspace = "linear";
+    std::vector<Image> codes;
+    std::vector<double> exposures;
+    for (const auto& b : first->brackets) {
+      codes.push_back(ReadPhoto(dir_ / b.file, nullptr, input_));
+      exposures.push_back(b.exposure);
+      sum_.response_files.push_back(b.file);
+    }
+    sum_.response = RecoverResponse(codes, exposures, o_.hdr, fmt::format("'{}' (bracket of photos[{}])",
+                                                                         first->file, first - manifest_.photos.begin()));
+  }
+
+  // The photo's linear image: one photo as read (through the response curve if one was
+  // recovered), or a bracket merged to value / exposure (then `*exposure_out` = 1).
+  HdrMerge LoadPhoto(const PhotoEntry& e, std::vector<std::string>* warnings, double* exposure_out) const {
+    *exposure_out = e.exposure;
+    HdrMerge m;
+    if (e.brackets.empty()) {
+      m.radiance = ReadPhoto(dir_ / e.file, warnings, input_);
+      if (!sum_.response.empty()) ApplyResponse(m.radiance, sum_.response, e.file);
+      return m;
+    }
+    std::vector<Image> stored;
+    std::vector<double> exposures;
+    std::vector<std::string> files;
+    for (const auto& b : e.brackets) {
+      stored.push_back(ReadPhoto(dir_ / b.file, warnings, input_));
+      exposures.push_back(b.exposure);
+      files.push_back(b.file);
+    }
+    *exposure_out = 1;
+    return MergeBracket(stored, exposures, files, sum_.response, o_.hdr);
+  }
+
   // Reads one photo, detects its markers, fits its geometry and checks that the sample is in view.
   PhotoGeometry FitPhoto(const PhotoEntry& e, const TagDetector& det, PhotoReport& r) const {
-    const Image im = ReadPhoto(dir_ / e.file, &r.warnings, input_);
+    double exposure = 0;
+    const HdrMerge merged = LoadPhoto(e, &r.warnings, &exposure);
+    const Image& im = merged.radiance;
+    r.exposures = e.brackets.empty() ? 1 : static_cast<int>(e.brackets.size());
+    r.hdr_clipped_pixels = merged.clipped_pixels;
     const bool pose = o_.use_intrinsics && e.camera.fx > 0;
     if (pose && (im.width != e.camera.width || im.height != e.camera.height))
       ThrowBadInput("photo is {}x{} but its camera model in the manifest is {}x{}", im.width, im.height,
@@ -431,11 +488,25 @@ class Registration {
     return by_light;
   }
 
-  Image RectifyPhoto(const PhotoEntry& e, const PhotoGeometry& g, PhotoReport& r) const {
-    const Image im = ReadPhoto(dir_ / e.file, nullptr, input_);
+  Image RectifyPhoto(const PhotoEntry& entry, const PhotoGeometry& g, PhotoReport& r) const {
+    PhotoEntry e = entry;
+    const HdrMerge merged = LoadPhoto(entry, nullptr, &e.exposure);
+    const PlateToPixel project = [&g](const Vec2& p, Vec2* px) { return g.Project(Vec3(p.x(), p.y(), 0), px); };
     RectifyStats st;
-    Image tex = Rectify(
-        im, [&g](const Vec2& p, Vec2* px) { return g.Project(Vec3(p.x(), p.y(), 0), px); }, S_, o_.rectify, &st);
+    Image tex = Rectify(merged.radiance, project, S_, o_.rectify, &st);
+    if (merged.clipped_pixels > 0) {  // a texel touching a pixel clipped in every exposure has no value
+      const Image mask = Rectify(merged.clipped, project, S_, o_.rectify);
+      const auto n = std::count_if(mask.pixels.begin(), mask.pixels.end(), [](float x) { return x > 0; });
+      if (n > 0) {
+        std::string files;
+        for (const auto& b : entry.brackets) files += (files.empty() ? "'" : ", '") + b.file + "'";
+        ThrowBadInput("{} of the {} texels of the sample are clipped in every exposure of the bracket ({}; stored "
+                      "value >= {} of full scale{}): add a shorter exposure",
+                      n, mask.pixels.size(), files, o_.hdr.saturation,
+                      sum_.response.empty() ? "" : fmt::format(" or code > {}, the response curve's last constrained "
+                                                               "code", sum_.response.max_code));
+      }
+    }
     r.invalid_fraction = st.invalid_fraction;
     r.max_footprint_px = st.max_footprint_px;
     if (st.invalid_fraction > o_.max_invalid_fraction)

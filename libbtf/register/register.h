@@ -22,6 +22,7 @@
 #include "libbtf/io/rig.h"
 #include "libbtf/register/detect.h"
 #include "libbtf/register/geometry.h"
+#include "libbtf/register/hdr.h"
 #include "libbtf/register/lattice.h"
 #include "libbtf/register/rectify.h"
 
@@ -34,6 +35,7 @@ struct RegisterOptions {
                                   // the file's colour-space tag (io/image_io.h)
   std::filesystem::path camera;   // optional camera.json (btf-register calibrate): replaces every photo's
                                   // manifest intrinsics (radtan model only)
+  HdrOptions hdr;                 // exposure brackets: merge weights and the camera response (hdr.h)
   GeometryOptions geometry;
   RectifyOptions rectify;         // resolution N (default 256) and the anti-aliasing filter
   bool use_intrinsics = true;     // pose from the manifest camera (marker height, distortion); false = homography
@@ -62,6 +64,8 @@ struct PhotoReport {
   Eigen::Matrix3d camera_from_plate_rotation = Eigen::Matrix3d::Identity();    // camera_from_plate (with pose)
   Vec3 camera_from_plate_translation = Vec3::Zero();
   double invalid_fraction = 0, max_footprint_px = 0;
+  int exposures = 1;                      // photos merged (a bracket: > 1)
+  std::size_t hdr_clipped_pixels = 0;     // bracket: pixels clipped in every exposure (anywhere in the photo)
   std::vector<std::string> warnings;
   // With RegisterOptions::truth: RMS against the true marker corners and the true surface
   // homography over an 11 x 11 grid on the sample (px); -1 = not computed.
@@ -77,6 +81,8 @@ struct RegisterSummary {
   int reference_view = -1;                 // manifest view index used for the lattice
   std::vector<PhotoReport> reports;
   Image contact_sheet;                     // empty unless contact_sheet_thumb > 0 and a view registered
+  ResponseCurve response;                  // recovered camera response (HdrOptions::response not "linear")
+  std::vector<std::string> response_files;  // the bracket it was recovered from
   PhaseTimes times;
   nlohmann::json ToJson() const;           // the registration report (docs/btf-register.md)
   std::string Report() const;              // what btf-register run prints

@@ -139,6 +139,19 @@ void PhotoOptions::Check() const {
   BTF_CHECK_OPTION(std::isfinite(grid_spacing) && grid_spacing > 0 && grid_spacing < 2, "grid-spacing", "(0, 2)");
   BTF_CHECK_OPTION(std::isfinite(exposure) && exposure >= 0, "exposure", ">= 0 (0 = auto)");
   BTF_CHECK_OPTION(std::isfinite(noise) && noise >= 0 && noise <= 1, "noise", "0..1 of full scale");
+  BTF_CHECK_OPTION(brackets.empty() || (brackets.size() >= 2 && brackets.size() <= 16), "brackets", "2..16 exposures");
+  for (double b : brackets) BTF_CHECK_OPTION(std::isfinite(b) && b > 0 && b <= 1e6, "brackets", "factors in (0, 1e6]");
+  BTF_CHECK_OPTION(brackets.empty() || format != "exr", "brackets", "an integer format (exr does not clip)");
+  BTF_CHECK_OPTION(std::isfinite(response_gamma) && response_gamma >= 0 && response_gamma <= 5, "response-gamma",
+                   "0 (none) .. 5");
+  BTF_CHECK_OPTION(std::isfinite(response_bias) && response_bias > 0 && response_bias < 1, "response-bias", "(0, 1)");
+  BTF_CHECK_OPTION(response_gamma == 0 || ((format == "png8" || format == "jpeg") && transfer == "linear"),
+                   "response-gamma", "8-bit format (png8 or jpeg) with transfer linear (the response replaces it)");
+}
+
+double CameraResponse(const PhotoOptions& o, double x) {
+  const double y = std::pow(std::clamp(x, 0.0, 1.0), 1.0 / o.response_gamma);
+  return y / ((1.0 / o.response_bias - 2.0) * (1.0 - y) + 1.0);
 }
 
 nlohmann::json PhotoSummary::ToJson() const {
@@ -389,6 +402,22 @@ PhotoSummary SynthesizePhotos(const PhotoOptions& o, const SvbrdfModel& model, c
   if (o.blur_px > 0) manifest.extra["blur_sigma_px"] = o.blur_px;
   if (o.format == "jpeg") manifest.extra["jpeg_quality"] = o.jpeg_quality;
   if (o.target != "ring") manifest.extra["target"] = o.target;
+  if (!o.brackets.empty()) {
+    manifest.extra["brackets"] = o.brackets;
+    manifest.extra["white_level"] = "full scale: exposure * radiance (+ noise) is clipped at 1 before encoding";
+  }
+  if (o.response_gamma > 0) {
+    std::vector<double> inverse(256);  // the truth a recovered curve is compared with: code -> linear
+    for (int z = 0; z < 256; ++z) {
+      double lo = 0, hi = 1;  // bisection of the monotone response
+      for (int it = 0; it < 60; ++it) (CameraResponse(o, 0.5 * (lo + hi)) < z / 255.0 ? lo : hi) = 0.5 * (lo + hi);
+      inverse[static_cast<std::size_t>(z)] = 0.5 * (lo + hi);
+    }
+    manifest.extra["response"] = {{"curve", "code / 255 = bias(min(1, x)^(1 / gamma)), bias(y) = y / ((1 / b - 2) (1 - y) + 1)"},
+                                  {"gamma", o.response_gamma},
+                                  {"bias", o.response_bias},
+                                  {"code_to_linear", inverse}};
+  }
   std::vector<PhotoTruth> truth;
   PhotoSummary summary;
   PhaseTimes times;
@@ -413,24 +442,37 @@ PhotoSummary SynthesizePhotos(const PhotoOptions& o, const SvbrdfModel& model, c
     for (float x : img.pixels) peak = std::max(peak, static_cast<double>(x));
     double exposure = o.exposure;
     if (exposure <= 0) exposure = (o.format == "exr" || peak <= 0) ? 1.0 : 0.9 / peak;
-    for (std::size_t i = 0; i < img.pixels.size(); ++i) {
-      double x = exposure * img.pixels[i];
-      if (o.noise > 0) {  // Box-Muller on a hash: the same noise whatever the thread count
-        const double u1 = std::max(HashUniform(o.seed, k * 2 + 1, i), 1e-300), u2 = HashUniform(o.seed, k * 2 + 2, i);
-        x += o.noise * std::sqrt(-2 * std::log(u1)) * std::cos(2 * kPi * u2);
-      }
-      img.pixels[i] = static_cast<float>(std::max(0.0, x));
-    }
-    const std::string file = fmt::format("v{:03d}_l{:03d}{}", vi, li, ext);
-    WriteImage(dir / file, img, wopt);
-    times.Add("write", t.Seconds());
     PhotoEntry e;
+    const std::vector<double> factors = o.brackets.empty() ? std::vector<double>{1.0} : o.brackets;
+    for (std::size_t b = 0; b < factors.size(); ++b) {
+      const double eb = exposure * factors[b];
+      const std::uint64_t stream = (k + b * pairs.size()) * 2;  // bracket 0: the single photo's noise
+      Image shot = img;
+      for (std::size_t i = 0; i < shot.pixels.size(); ++i) {
+        double x = eb * img.pixels[i];
+        if (o.noise > 0) {  // Box-Muller on a hash: the same noise whatever the thread count
+          const double u1 = std::max(HashUniform(o.seed, stream + 1, i), 1e-300), u2 = HashUniform(o.seed, stream + 2, i);
+          x += o.noise * std::sqrt(-2 * std::log(u1)) * std::cos(2 * kPi * u2);
+        }
+        x = std::max(0.0, x);
+        if (!o.brackets.empty()) x = std::min(1.0, x);  // the white level (integer writing clips there anyway)
+        if (o.response_gamma > 0) x = CameraResponse(o, x);
+        shot.pixels[i] = static_cast<float>(x);
+      }
+      const std::string file = o.brackets.empty() ? fmt::format("v{:03d}_l{:03d}{}", vi, li, ext)
+                                                  : fmt::format("v{:03d}_l{:03d}_e{}{}", vi, li, b, ext);
+      WriteImage(dir / file, shot, wopt);
+      if (!o.brackets.empty()) e.brackets.push_back({file, eb});
+      summary.files.push_back(file);
+    }
+    times.Add("write", t.Seconds());
+    const std::string file = o.brackets.empty() ? summary.files.back() : e.brackets[0].file;
     e.file = file;
     e.view_index = vi;
     e.light_index = li;
     e.view_dir = vdir.normalized();
     e.light_dir = ldir.normalized();
-    e.exposure = exposure;
+    e.exposure = o.brackets.empty() ? exposure : e.brackets[0].exposure;
     e.light_intensity = intensity;
     e.light_distance_mm = o.light_distance_mm;
     e.camera_distance_mm = o.camera_distance_mm;
@@ -451,7 +493,6 @@ PhotoSummary SynthesizePhotos(const PhotoOptions& o, const SvbrdfModel& model, c
       if (visible) tr.marker_corners_px[m.id] = px;
     }
     truth.push_back(std::move(tr));
-    summary.files.push_back(file);
   }
   reporter.Progress(pairs.size(), pairs.size(), "photos");
   WriteBoard(dir / "board.json", board);

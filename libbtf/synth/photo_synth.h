@@ -55,6 +55,10 @@ struct PhotoOptions {
   std::string transfer = "linear";  // integer encoding: "linear" or "srgb" (the sRGB curve, tagged in the file)
   int jpeg_quality = 90;          // with format jpeg, 1..100
   double exposure = 0;            // 0 = auto: brightest pixel at 0.9 of full scale (1 for exr)
+  std::vector<double> brackets;   // exposure bracket: factors on the exposure, one photo each (empty = one
+                                  // photo); values clip at the white level (full scale), as on a sensor
+  double response_gamma = 0;      // camera response (0 = none): code = bias(min(1, x)^(1 / gamma)), 8-bit formats
+  double response_bias = 0.5;     // Schlick's bias(y) = y / ((1 / b - 2) (1 - y) + 1); 0.5 = no bias
   double noise = 0;               // Gaussian read noise, SD as a fraction of full scale
   std::uint64_t seed = 1;         // noise seed
   void Check() const;
@@ -87,6 +91,9 @@ CameraPose MakeCamera(const PhotoOptions& options, const Board& board, const Vec
 // Radiance image (linear float RGB, before exposure) of the plate for one view and light.
 Image RenderPhoto(const SvbrdfModel& model, const Board& board, const PhotoOptions& options, const CameraPose& cam,
                   const Vec3& view_dir, const Vec3& light_dir);
+
+// The camera response of `options` (response_gamma > 0): linear value in [0, 1] -> stored value in [0, 1].
+double CameraResponse(const PhotoOptions& options, double linear);
 
 // The (view index, light index) pairs to shoot: the subsets, then the even spread.
 std::vector<std::pair<int, int>> SelectPhotos(const PhotoOptions& options);

@@ -267,6 +267,13 @@ int main(int argc, char** argv) {
   add_input_flags(cr, ro.input, rf.input_gamma);
   cr->add_flag("--no-intrinsics", rf.no_intrinsics, "Ignore the manifest's camera: one homography per photo");
   cr->add_flag("--no-radiometry", rf.no_radiometry, "Store pixel / exposure (units 'relative') instead of BRDF");
+  cr->add_option("--hdr-response", ro.hdr.response,
+                 "Exposure brackets: linear (decoded values are linear) | debevec (recover the camera response "
+                 "from the first bracket; 8-bit photos)");
+  cr->add_option("--hdr-samples", ro.hdr.debevec_samples, "--hdr-response debevec: pixels sampled for the fit");
+  cr->add_option("--hdr-lambda", ro.hdr.debevec_lambda, "--hdr-response debevec: smoothness weight");
+  cr->add_option("--hdr-saturation", ro.hdr.saturation, "Brackets: stored value >= this fraction of full scale is clipped");
+  cr->add_option("--hdr-dark", ro.hdr.dark, "Brackets: stored value <= this fraction of full scale is dark (left out)");
   cr->add_option("--samples-per-px", ro.rectify.samples_per_px, "Anti-aliasing: samples per photo pixel per axis");
   cr->add_option("--max-samples", ro.rectify.max_samples_per_axis, "Anti-aliasing: cap on samples per texel axis");
   cr->add_option("--min-markers", ro.geometry.min_markers, "Fewer usable markers fail the photo");

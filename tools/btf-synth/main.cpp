@@ -200,6 +200,13 @@ int main(int argc, char** argv) {
                  "AprilGrid: tag side, mm (0 = grid spans 85% of the image at 0 deg with --focal, else 88)");
   cp->add_option("--grid-spacing", po.grid_spacing, "AprilGrid: gap between tags / tag side");
   cp->add_option("--exposure", po.exposure, "Pixel value = exposure x radiance (0 = auto)");
+  cp->add_option("--brackets", po.brackets,
+                 "Exposure bracket: factors on the exposure, comma-separated (e.g. 0.25,1,4); one photo each, "
+                 "clipped at the white level")
+      ->delimiter(',');
+  cp->add_option("--response-gamma", po.response_gamma,
+                 "Camera response: code = bias(x^(1/G)) (0 = none; png8/jpeg with --transfer linear)");
+  cp->add_option("--response-bias", po.response_bias, "Camera response: Schlick bias b in (0, 1) (0.5 = none)");
   cp->add_option("--noise", po.noise, "Gaussian read noise SD, fraction of full scale");
   cp->add_option("--seed", po.seed, "Noise seed");
   cp->add_option("--sample-tiles", po.sample_tiles, "Sample side in tiles");
