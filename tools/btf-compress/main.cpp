@@ -72,7 +72,7 @@ int main(int argc, char** argv) {
   CompressFlags cf;
   btf::CompressOptions& co = cf.options;
   app.add_option("DATASET", cf.dataset, "Input dataset (.h5, libbtf-dataset) or Bonn .btf file");
-  app.add_option("--method", cf.method, "pca-view | lpca");
+  app.add_option("--method", cf.method, "pca-view | lpca | fmf | dfmf (Bonn full-matrix factorisation, per YUV channel for dfmf)");
   app.add_option("--components,-c", co.components,
                  "Components per view slot (pca-view) or per cluster (lpca); the maximum with --error/--energy");
   app.add_option("--clusters,-k", co.clusters, "LPCA clusters");

@@ -4,6 +4,7 @@
 #include "libbtf/compress/bonn_pvf.h"
 #include "libbtf/compress/codec_source.h"
 #include "libbtf/core/atomic_file.h"
+#include "libbtf/io/file_kind.h"
 #include "libbtf/io/convert.h"
 #include "tools/common/cli.h"
 
@@ -22,6 +23,14 @@ int RunConvert(const CLI::App& app, const btf::cli::CommonFlags& common, const C
     btf::FmfWriteOptions o = f.fmf;
     o.decorrelate = target == "dfmf";
     o.Check();
+    if (btf::FileFormatOf(f.input) == btf::kCodecFormat) {
+      // An fmf / dfmf codec already holds the factors: written as they are.
+      const btf::Codec codec = btf::ReadCodec(f.input);
+      if (btf::MethodName(codec.method()) == target) {
+        btf::cli::PrintSummary(app, common, btf::WriteFmf(codec, f.input, f.output, btf::cli::MakeReporter(common)));
+        return 0;
+      }
+    }
     const auto input = btf::OpenSource(f.input);
     btf::cli::PrintSummary(app, common, btf::WriteFmf(o, *input, f.output, btf::cli::MakeReporter(common)));
     return 0;
