@@ -8,6 +8,7 @@
 #include "libbtf/io/bonn.h"
 #include "libbtf/io/dataset_io.h"
 #include "libbtf/io/half.h"
+#include "libbtf/io/image_io.h"
 #include "libbtf/io/slot_source.h"
 #include "tests/io/bonn_test.h"
 #include "tests/test_util.h"
@@ -119,6 +120,17 @@ TEST(BtfConvert, BadInputAndUsageExitCodesWriteNothing) {
   EXPECT_EQ(test::RunCommand(tool + " " + d + "a.h5 -o " + d + "out.btf --to pvf 2>/dev/null"), 3);
   EXPECT_EQ(test::RunCommand(tool + " " + d + "none.btf -o " + d + "out.h5 2>/dev/null"), 4);
   for (const char* name : {"out.h5", "out.txt", "out.btf"}) EXPECT_FALSE(std::filesystem::exists(dir / name)) << name;
+  // An image set (tests/io ImageSet.* cover the layouts): imported, or refused with exit 3 when an
+  // image is missing, nothing written.
+  std::filesystem::create_directories(dir / "set");
+  for (int l : {0, 30}) WriteImage(dir / "set" / fmt::format("tl{}_pl0_tv0_pv0.exr", l), Image(2, 2, 3));
+  std::string out;
+  ASSERT_EQ(test::RunCommand(tool + " " + d + "set -o " + d + "set.h5 --layout pattern --pattern 'tl{tl}_pl{pl}_tv{tv}_pv{pv}.exr' --json --quiet", &out), 0);
+  EXPECT_EQ(nlohmann::json::parse(out)["missing_images"], 0);
+  EXPECT_EQ(ReadDataset(dir / "set.h5").num_lights(), 2);
+  WriteImage(dir / "set" / "tl30_pl0_tv15_pv0.exr", Image(2, 2, 3));  // view 1 lacks light 0
+  EXPECT_EQ(test::RunCommand(tool + " " + d + "set -o " + d + "out.h5 --layout pattern --pattern 'tl{tl}_pl{pl}_tv{tv}_pv{pv}.exr' 2>/dev/null"), 3);
+  EXPECT_FALSE(std::filesystem::exists(dir / "out.h5"));
   // --to overrides the extension.
   ASSERT_EQ(test::RunCommand(tool + " " + d + "a.btf -o " + d + "x.data --to dataset --quiet"), 0);
   EXPECT_EQ(ReadDataset(dir / "x.data").num_views(), 2);
