@@ -18,8 +18,12 @@ void ConvertOptions::Check() const {
 }
 
 nlohmann::json ConvertOptions::ToJson() const {
-  return {{"to", to},           {"storage", storage},         {"deflate_level", deflate_level},
-          {"scan_lines_per_chunk", scan_lines_per_chunk}, {"layout", layout}, {"pattern", pattern},
+  return {{"to", to},
+          {"storage", storage},
+          {"deflate_level", deflate_level},
+          {"scan_lines_per_chunk", scan_lines_per_chunk},
+          {"layout", layout},
+          {"pattern", pattern},
           {"allow_missing", allow_missing}};
 }
 
@@ -40,13 +44,14 @@ std::string ConvertTarget(const ConvertOptions& options, const std::filesystem::
 }
 
 nlohmann::json ConvertSummary::ToJson() const {
-  nlohmann::json j = {{"input", input},
-          {"input_kind", input_kind},
-          {"output", output},
-          {"output_format", output_format},
-          {"shape", {{"views", views}, {"lights", lights}, {"height", height}, {"width", width}, {"channels", channels}}},
-          {"bytes_written", bytes_written},
-          {"seconds", times.ToJson()}};
+  nlohmann::json j = {
+      {"input", input},
+      {"input_kind", input_kind},
+      {"output", output},
+      {"output_format", output_format},
+      {"shape", {{"views", views}, {"lights", lights}, {"height", height}, {"width", width}, {"channels", channels}}},
+      {"bytes_written", bytes_written},
+      {"seconds", times.ToJson()}};
   if (input_kind.rfind("image-set", 0) == 0) j["missing_images"] = missing_images;
   return j;
 }

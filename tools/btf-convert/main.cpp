@@ -1,11 +1,12 @@
 // btf-convert INPUT -o OUTPUT [--to dataset|bdi|fmf|dfmf|pvf]: any readable BTF (libbtf dataset or codec, Bonn
-// .btf) to a libbtf dataset or a Bonn BDI file, one view slot at a time (docs/btf-convert.md).
+// .btf) to a libbtf dataset or a Bonn BDI, FMF, DFMF or PVF file, one view slot at a time; a folder of images
+// (--layout) to a dataset (docs/btf-convert.md).
 #include "libbtf/compress/bonn_fmf.h"
 #include "libbtf/compress/bonn_pvf.h"
 #include "libbtf/compress/codec_source.h"
 #include "libbtf/core/atomic_file.h"
-#include "libbtf/io/file_kind.h"
 #include "libbtf/io/convert.h"
+#include "libbtf/io/file_kind.h"
 #include "tools/common/cli.h"
 
 namespace {
