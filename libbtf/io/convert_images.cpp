@@ -1,7 +1,6 @@
 // Image sets (UBO2003, ATRIUM, any folder by a name pattern) imported into a dataset file.
 #include <algorithm>
 #include <cmath>
-#include <map>
 #include <regex>
 #include <vector>
 
@@ -12,7 +11,6 @@
 namespace btf {
 
 namespace {
-
 
 struct Found {
   std::filesystem::path path;

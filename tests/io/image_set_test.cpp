@@ -121,6 +121,42 @@ TEST(ImageSet, Ubo2003JpegIsDecodedFromSrgbAndMissingImagesAreNamed) {
   for (float x : d.image(0, 0)) ASSERT_EQ(x, 0.0f);
 }
 
+// A Radiance RGBE file built byte by byte (flat scanlines, width < 8 so no run-length encoding),
+// resolution line "-Y H +X W" (top row first); `pixels` hold values exact in RGBE.
+void SaveHdr(const std::filesystem::path& path, int w, int h, const std::function<float(int x, int y, int c)>& value) {
+  test::Bytes f;
+  f.Text("#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n").Text(fmt::format("-Y {} +X {}\n", h, w));
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      float rgb[3];
+      for (int c = 0; c < 3; ++c) rgb[c] = value(x, y, c);
+      int e = 0;
+      std::frexp(std::max({rgb[0], rgb[1], rgb[2]}), &e);
+      for (float v : rgb) f.U8(std::uint8_t(std::ldexp(v, 8 - e)));
+      f.U8(std::uint8_t(e + 128));
+    }
+  f.Save(path);
+}
+
+TEST(ImageSet, AtriumHdrIsReadAsStored) {
+  const auto dir = test::TempDir();
+  std::filesystem::create_directories(dir / "atrium");
+  // Bonn 81 view 8 = (30, 30), light 1 = (15, 0): image number 81 + 8 = 89. Values k/8 with a
+  // shared exponent: exact in RGBE.
+  auto value = [](int x, int y, int c) { return float(1 + x + 3 * y + 7 * c) / 8.0f; };
+  SaveHdr(dir / "atrium" / "00089 tl015 pl000 tv030 pv030.hdr", 3, 2, value);
+  ConvertOptions o;
+  o.layout = "atrium";
+  o.allow_missing = true;
+  ImportImageSet(o, dir / "atrium", dir / "out.h5");
+  const Dataset d = ReadDataset(dir / "out.h5");
+  ASSERT_EQ(d.width(), 3);
+  ASSERT_EQ(d.height(), 2);
+  for (int y = 0; y < 2; ++y)
+    for (int x = 0; x < 3; ++x)
+      for (int c = 0; c < 3; ++c) ASSERT_EQ(d.image(8, 1)[(std::size_t(y) * 3 + x) * 3 + c], value(x, y, c)) << x << y << c;
+}
+
 TEST(ImageSet, BadSetsAreRefusedNamingTheFiles) {
   const auto dir = test::TempDir();
   const auto set = dir / "set";
