@@ -1,12 +1,13 @@
 // module: compress
 // Structure-aware fuzzing of the codec reader (libbtf-codec, schema validation on top of HDF5).
-// Two valid codec files (pca-view and lpca) are made once; each input then deletes, retypes,
+// Four valid codec files (pca-view, lpca, fmf with a log, dfmf) are made once; each input then deletes, retypes,
 // reshapes or overwrites some of their items and attributes before ReadCodec reads the result,
 // so the fuzzer explores our validation rather than HDF5's checksum rejection. Whatever the
 // reader accepts must decode every view slot and an ABRDF without touching memory it does not
 // own (ASan) or undefined behavior (UBSan).
 #include <hdf5.h>
 
+#include <array>
 #include <cmath>
 #include <filesystem>
 #include <limits>
@@ -42,7 +43,7 @@ class Bytes {
   std::size_t n_, i_ = 0;
 };
 
-std::string base_paths[2];
+std::array<std::string, 4> base_paths;
 
 btf::Dataset TinyDataset() {
   const btf::Sampling views("v", {btf::Vec3(0, 0, 1), btf::Vec3(0.5, 0, 0.866), btf::Vec3(0, 0.5, 0.866)});
@@ -123,7 +124,7 @@ void ReplaceAttribute(const btf::h5::File& f, const std::string& item, Bytes& b)
   const auto at = item.find('@');
   const std::string object = item.substr(0, at), name = item.substr(at + 1);
   H5Adelete_by_name(f.id(), object.c_str(), name.c_str(), H5P_DEFAULT);
-  static const char* const kStrings[] = {"pca-view", "lpca", "log", "none", "R,G,B", "", "2.0.0",
+  static const char* const kStrings[] = {"pca-view", "lpca", "fmf", "dfmf", "log", "none", "R,G,B", "", "2.0.0",
                                          "1.0.0", "libbtf-codec", "libbtf-dataset", "Y", "R,,B"};
   switch (b.Next() % 4) {
     case 0: return;  // deleted
@@ -154,13 +155,22 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
   btf::WriteCodec(base_paths[0], codec);
   btf::Compress(lpca, *btf::MemorySource(d), &codec);
   btf::WriteCodec(base_paths[1], codec);
+  for (int i : {2, 3}) {  // full-matrix factorisations: fmf (log) and dfmf
+    btf::CompressOptions fmf;
+    fmf.method = i == 2 ? btf::CodecMethod::kFmf : btf::CodecMethod::kDfmf;
+    fmf.components = 2;
+    fmf.log_transform = i == 2;
+    base_paths[std::size_t(i)] = dir + (i == 2 ? "/fmf.h5" : "/dfmf.h5");
+    btf::Compress(fmf, *btf::MemorySource(d), &codec);
+    btf::WriteCodec(base_paths[std::size_t(i)], codec);
+  }
   return 0;
 }
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   Bytes b(data, size);
   const std::string path = "/tmp/btf-fuzz-codec-" + std::to_string(::getpid()) + ".h5";
-  std::filesystem::copy_file(base_paths[b.Next() & 1], path, std::filesystem::copy_options::overwrite_existing);
+  std::filesystem::copy_file(base_paths[b.Next() % base_paths.size()], path, std::filesystem::copy_options::overwrite_existing);
   try {
     btf::h5::File f = btf::h5::File::OpenForUpdate(path);
     Items items;

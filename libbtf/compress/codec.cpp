@@ -13,12 +13,22 @@ namespace {
 using RowMajorF = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 }
 
-std::string MethodName(CodecMethod method) { return method == CodecMethod::kPcaView ? "pca-view" : "lpca"; }
+std::string MethodName(CodecMethod method) {
+  switch (method) {
+    case CodecMethod::kPcaView: return "pca-view";
+    case CodecMethod::kLpca: return "lpca";
+    case CodecMethod::kFmf: return "fmf";
+    case CodecMethod::kDfmf: return "dfmf";
+  }
+  return "unknown";
+}
 
 CodecMethod ParseMethod(const std::string& name) {
   if (name == "pca-view") return CodecMethod::kPcaView;
   if (name == "lpca") return CodecMethod::kLpca;
-  ThrowUsage("unknown compression method '{}' (use pca-view or lpca)", name);
+  if (name == "fmf") return CodecMethod::kFmf;
+  if (name == "dfmf") return CodecMethod::kDfmf;
+  ThrowUsage("unknown compression method '{}' (use pca-view, lpca, fmf or dfmf)", name);
 }
 
 void CompressOptions::Check() const {
@@ -48,7 +58,8 @@ nlohmann::json CompressSummary::ToJson() const {
   j["input"] = input;
   j["shape"] = {{"views", views}, {"lights", lights}, {"height", height}, {"width", width}, {"channels", channels}};
   j["components"] = components;
-  j[method == "lpca" ? "cluster_components" : "slot_components"] = slot_components;
+  j[method == "lpca" ? "cluster_components" : method == "fmf" || method == "dfmf" ? "matrix_components" : "slot_components"] =
+      slot_components;
   if (method == "lpca") {
     j["clusters"] = clusters;
     j["iteration_relative_errors"] = iteration_errors;
@@ -84,6 +95,8 @@ std::string CompressSummary::Report() const {
                    height, channels);
   if (method == "lpca")
     r += fmt::format("  clusters x components {} x {} (max per cluster)\n", clusters, components);
+  else if (method == "fmf" || method == "dfmf")
+    r += fmt::format("  components            {} (per matrix: {})\n", components, fmt::join(slot_components, " "));
   else
     r += fmt::format("  components            {} (max per view slot)\n", components);
   r += fmt::format("  codec size            {} (coefficients)\n", FormatBytes(codec_bytes));
@@ -123,6 +136,8 @@ std::uint64_t Codec::StoredBytes() const {
   std::uint64_t values = 0;
   if (method_ == CodecMethod::kPcaView) {
     for (const auto& s : slots_) values += s.mean.size() + s.basis.size() + s.weights.size();
+  } else if (IsFullMatrixFactorisation(method_)) {
+    values = fmf_.StoredValues();
   } else {
     values = lpca_.means.size() + lpca_.basis.size() + lpca_.weights.size() + lpca_.cluster_of.size() +
              lpca_.cluster_components.size();
@@ -140,6 +155,7 @@ float Codec::Untransform(float y) const {
 }
 
 void Codec::SampleTransformed(int view, int light, std::size_t texel, float* out) const {
+  if (IsFullMatrixFactorisation(method_)) return fmf_.Sample(view, light, texel, out);
   const int C = channels_;
   if (method_ == CodecMethod::kPcaView) {
     const PcaViewSlot& s = slots_[static_cast<std::size_t>(view)];
@@ -182,6 +198,8 @@ void Codec::DecodeViewSlot(int view, float* out) const {
     } else {
       o.rowwise() = mean.transpose();
     }
+  } else if (IsFullMatrixFactorisation(method_)) {
+    fmf_.DecodeViewSlot(view, out);
   } else {
     const LpcaModel& m = lpca_;
     const std::size_t d = abrdf_size(), seg = std::size_t(L) * C, base = std::size_t(view) * seg;
@@ -218,6 +236,10 @@ void Codec::DecodeImage(int view, int light, float* out) const {
       const Eigen::Map<const Eigen::VectorXf> w(&s.weights[std::size_t(light) * s.components], s.components);
       o.noalias() += b.transpose() * w;
     }
+    if (transform_ != ValueTransform::kNone)
+      for (std::size_t i = 0; i < D; ++i) out[i] = Untransform(out[i]);
+  } else if (IsFullMatrixFactorisation(method_)) {
+    fmf_.DecodeImage(view, light, out);
     if (transform_ != ValueTransform::kNone)
       for (std::size_t i = 0; i < D; ++i) out[i] = Untransform(out[i]);
   } else {
@@ -315,6 +337,8 @@ nlohmann::json Codec::Describe() const {
     int lo = 1 << 30, hi = 0;
     for (const auto& s : slots_) lo = std::min(lo, s.components), hi = std::max(hi, s.components);
     j["components_per_slot"] = {{"min", slots_.empty() ? 0 : lo}, {"max", hi}};
+  } else if (IsFullMatrixFactorisation(method_)) {
+    for (const auto& m : fmf_.matrices) j["components_per_matrix"].push_back(m.components);
   } else {
     j["clusters"] = lpca_.clusters;
     j["components"] = lpca_.components;

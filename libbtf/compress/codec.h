@@ -1,6 +1,7 @@
 #pragma once
-// BTF codecs: per-view PCA (Sattler et al. 2003) and local PCA (Mueller et al. 2003, as described
-// in Schneider 2004 section 3), their file format "libbtf-codec" (docs/format.md) and decoders.
+// BTF codecs: per-view PCA (Sattler et al. 2003), local PCA (Mueller et al. 2003, as described
+// in Schneider 2004 section 3) and Bonn's full-matrix factorisations FMF / DFMF (fmf_codec.h),
+// their file format "libbtf-codec" (docs/format.md) and decoders.
 //
 // Stable public API (btf-eval and btf-compress code against it):
 //   Compress                     CompressOptions + view-slot source (memory or file) -> Codec
@@ -15,6 +16,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "libbtf/compress/fmf_codec.h"
 #include "libbtf/compress/scene.h"
 #include "libbtf/core/atomic_file.h"
 #include "libbtf/core/dataset.h"
@@ -28,11 +30,13 @@ inline constexpr const char* kCodecFormat = "libbtf-codec";
 inline constexpr const char* kCodecFormatVersion = "1.0.0";
 inline constexpr int kCodecFormatMajor = 1;
 
-enum class CodecMethod { kPcaView, kLpca };
-// "pca-view" / "lpca".
+enum class CodecMethod { kPcaView, kLpca, kFmf, kDfmf };
+// "pca-view" / "lpca" / "fmf" / "dfmf".
 std::string MethodName(CodecMethod method);
 // Throws btf::Error (usage) for unknown names.
 CodecMethod ParseMethod(const std::string& name);
+// fmf or dfmf: one truncated SVD of the whole BTF (fmf_codec.h).
+inline bool IsFullMatrixFactorisation(CodecMethod m) { return m == CodecMethod::kFmf || m == CodecMethod::kDfmf; }
 
 // Value transform applied before the decomposition and undone after reconstruction.
 // kLog: y = log(x + epsilon); decoding gives exp(y) - epsilon. Inputs must be > -epsilon.
@@ -44,6 +48,8 @@ struct CompressOptions {
   // this is the maximum. Clamped (with a warning) to what the data allows: pca-view at most
   // lights - 1 per slot, lpca at most (cluster size - 1). Components whose eigenvalue is below
   // 1e-12 of the slot's (cluster's) largest are dropped (rank-deficient or constant data).
+  // fmf / dfmf: components of the one SVD (per YUV channel for dfmf), at most min(rows, texels);
+  // --error / --energy then apply per matrix, to the uncentred energy (fmf_codec.h).
   int components = 16;
   // LPCA clusters k; clamped (with a warning) to the number of texels.
   int clusters = 32;
@@ -134,6 +140,7 @@ class Codec {
   double log_epsilon() const { return log_epsilon_; }
   const std::vector<PcaViewSlot>& pca_view() const { return slots_; }
   const LpcaModel& lpca() const { return lpca_; }
+  const FmfModel& fmf() const { return fmf_; }
   // Options and summary of the compression that made it (JSON, stored in the file).
   const nlohmann::json& provenance() const { return provenance_; }
 
@@ -171,6 +178,7 @@ class Codec {
   double log_epsilon_ = 0;
   std::vector<PcaViewSlot> slots_;
   LpcaModel lpca_;
+  FmfModel fmf_;
   nlohmann::json provenance_ = nlohmann::json::object();
 };
 
@@ -181,6 +189,7 @@ class CodecBuilder {
                     DatasetInfo info, ValueTransform transform, double log_epsilon);
   static std::vector<PcaViewSlot>& slots(Codec& c) { return c.slots_; }
   static LpcaModel& lpca(Codec& c) { return c.lpca_; }
+  static FmfModel& fmf(Codec& c) { return c.fmf_; }
   static nlohmann::json& provenance(Codec& c) { return c.provenance_; }
 };
 

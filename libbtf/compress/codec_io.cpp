@@ -88,6 +88,8 @@ void WriteCodec(AtomicOutput& out, const Codec& c, const std::string& creator) {
         f.WriteFloats(SlotName("weights", v), {L, k}, s.weights.data());
         f.WriteDoubles(SlotName("eigenvalues", v), {k}, s.eigenvalues.data());
       }
+    } else if (IsFullMatrixFactorisation(c.method())) {
+      WriteFmfModel(f, c.fmf(), c.num_views(), c.height(), c.width());
     } else {
       const LpcaModel& m = c.lpca();
       const hsize_t K = m.clusters, k = m.components;
@@ -113,7 +115,8 @@ Codec ReadCodec(const std::filesystem::path& path) {
   if (!f.Exists("/codec")) ThrowBadInput("'{}': required group '/codec' is missing", path.string());
   const CodecMethod method = [&] {
     const std::string m = f.GetString("/codec", "method");
-    if (m != "pca-view" && m != "lpca") ThrowBadInput("'{}': unknown codec method '{}'", path.string(), m);
+    if (m != "pca-view" && m != "lpca" && m != "fmf" && m != "dfmf")
+      ThrowBadInput("'{}': unknown codec method '{}'", path.string(), m);
     return ParseMethod(m);
   }();
   DatasetInfo info;
@@ -166,6 +169,8 @@ Codec ReadCodec(const std::filesystem::path& path) {
       s.eigenvalues = f.Exists(SlotName("eigenvalues", v)) ? f.ReadDoubles(SlotName("eigenvalues", v))
                                                             : std::vector<double>(static_cast<std::size_t>(k), 0.0);
     }
+  } else if (IsFullMatrixFactorisation(method)) {
+    CodecBuilder::fmf(c) = ReadFmfModel(f, method == CodecMethod::kDfmf, int(V), int(L), H, W, C);
   } else {
     LpcaModel& m = CodecBuilder::lpca(c);
     const auto K = f.GetInt("/codec/lpca", "clusters"), k = f.GetInt("/codec/lpca", "components");

@@ -531,6 +531,9 @@ std::uint64_t FullCodecBytes(const CompressSummary& sum, const Codec& codec) {
   double values = 0;
   if (codec.method() == CodecMethod::kPcaView) {
     values = Vf * (T * Cf * (1 + cbar) + Lf * cbar);
+  } else if (IsFullMatrixFactorisation(codec.method())) {
+    const double matrices = double(sum.slot_components.size()), rows = Vf * Lf * Cf / matrices;
+    values = matrices * cbar * (rows + T + 1);
   } else {
     const double K = codec.lpca().clusters, c = codec.lpca().components;
     values = K * (c + 1) * Vf * Lf * Cf + T * (c + 1) + K;
@@ -575,6 +578,8 @@ CompressSummary Compress(const CompressOptions& options, const SlotSource& input
   sum.channels = in.channels();
   if (o.method == CodecMethod::kPcaView)
     CompressPcaView(in, o, tr, codec, sum, rep);
+  else if (IsFullMatrixFactorisation(o.method))
+    FillErrors(CompressFmf(in, o, [&](int v, float* x, std::size_t n) { tr.Apply(in, v, x, n); }, codec, sum, rep), sum);
   else
     LpcaCompressor(in, o, tr, sum, rep).Run(codec);
   sum.components = 0;

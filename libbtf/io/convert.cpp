@@ -12,10 +12,19 @@ void ConvertOptions::Check() const {
   BTF_CHECK_OPTION(storage == "float32" || storage == "float16", "storage", "must be float32 or float16");
   BTF_CHECK_OPTION(deflate_level >= 0 && deflate_level <= 9, "deflate_level", "must be 0 to 9");
   BTF_CHECK_OPTION(scan_lines_per_chunk >= 1, "scan_lines_per_chunk", "must be at least 1");
+  BTF_CHECK_OPTION(layout.empty() || layout == "ubo2003" || layout == "atrium" || layout == "pattern", "layout",
+                   "must be ubo2003, atrium or pattern");
+  BTF_CHECK_OPTION(pattern.empty() == (layout != "pattern"), "pattern", "given with --layout pattern, and only then");
 }
 
 nlohmann::json ConvertOptions::ToJson() const {
-  return {{"to", to}, {"storage", storage}, {"deflate_level", deflate_level}, {"scan_lines_per_chunk", scan_lines_per_chunk}};
+  return {{"to", to},
+          {"storage", storage},
+          {"deflate_level", deflate_level},
+          {"scan_lines_per_chunk", scan_lines_per_chunk},
+          {"layout", layout},
+          {"pattern", pattern},
+          {"allow_missing", allow_missing}};
 }
 
 std::string ConvertTarget(const ConvertOptions& options, const std::filesystem::path& output) {
@@ -35,13 +44,16 @@ std::string ConvertTarget(const ConvertOptions& options, const std::filesystem::
 }
 
 nlohmann::json ConvertSummary::ToJson() const {
-  return {{"input", input},
-          {"input_kind", input_kind},
-          {"output", output},
-          {"output_format", output_format},
-          {"shape", {{"views", views}, {"lights", lights}, {"height", height}, {"width", width}, {"channels", channels}}},
-          {"bytes_written", bytes_written},
-          {"seconds", times.ToJson()}};
+  nlohmann::json j = {
+      {"input", input},
+      {"input_kind", input_kind},
+      {"output", output},
+      {"output_format", output_format},
+      {"shape", {{"views", views}, {"lights", lights}, {"height", height}, {"width", width}, {"channels", channels}}},
+      {"bytes_written", bytes_written},
+      {"seconds", times.ToJson()}};
+  if (input_kind.rfind("image-set", 0) == 0) j["missing_images"] = missing_images;
+  return j;
 }
 
 std::string ConvertSummary::Report() const {

@@ -25,6 +25,15 @@ struct ConvertOptions {
   int deflate_level = 4;
   // BDI output: texture rows per chunk.
   int scan_lines_per_chunk = 4;
+  // Image-set input (ImportImageSet): "" (INPUT is a BTF file), "ubo2003" (8-bit sRGB JPEG),
+  // "atrium" (Radiance HDR) or "pattern" (file names given by `pattern`).
+  std::string layout;
+  // Layout "pattern": the path of each image relative to the folder, with the fields {tv} {pv}
+  // {tl} {pl} (view and light theta and phi in degrees, each exactly once), e.g.
+  // "tv{tv}_pv{pv}/tl{tl}_pl{pl}.exr".
+  std::string pattern;
+  // Missing (view, light) images are written as 0 instead of refusing the set.
+  bool allow_missing = false;
   void Check() const;
   nlohmann::json ToJson() const;
 };
@@ -37,6 +46,7 @@ struct ConvertSummary {
   std::string input, input_kind, output, output_format;
   int views = 0, lights = 0, height = 0, width = 0, channels = 0;
   std::uint64_t bytes_written = 0;
+  std::uint64_t missing_images = 0;  // image sets: (view, light) images written as 0 (--allow-missing)
   PhaseTimes times;  // convert (read, decode and write, interleaved per view slot)
   nlohmann::json ToJson() const;
   std::string Report() const;
@@ -47,5 +57,15 @@ struct ConvertSummary {
 // and WritePvf (libbtf/compress), which btf-convert calls.
 ConvertSummary Convert(const ConvertOptions& options, const SlotSource& input, const std::filesystem::path& output,
                        const Reporter& reporter = {});
+
+// Imports a folder of images, one per (view, light), into a dataset file (atomically, one image
+// at a time; docs/btf-convert.md "Image sets"). Directions come from the file names: ubo2003 and
+// atrium name Bonn 81 directions, `NNNNN tlTTT plPPP tvTTT pvPPP.jpg|.hdr` (NNNNN = 81 light +
+// view) anywhere under the folder; a pattern's directions are those its names hold (the Bonn 81
+// or UBO2014 sampling when they are exactly those). Images must share one size and channel count.
+// Missing images, unknown directions, duplicates and unreadable images are btf::Error (bad input)
+// naming the files; the output is then not written.
+ConvertSummary ImportImageSet(const ConvertOptions& options, const std::filesystem::path& folder,
+                              const std::filesystem::path& output, const Reporter& reporter = {});
 
 }  // namespace btf

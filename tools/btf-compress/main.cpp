@@ -1,5 +1,6 @@
-// btf-compress: per-view PCA and local-PCA codecs, decoding, renderer export (docs/btf-compress.md).
-//   btf-compress DATASET --method pca-view|lpca [...] -o codec.h5
+// btf-compress: per-view PCA, local-PCA and full-matrix factorisation codecs, decoding, renderer
+// export (docs/btf-compress.md).
+//   btf-compress DATASET --method pca-view|lpca|fmf|dfmf [...] -o codec.h5
 //   btf-compress decode CODEC -o dataset.h5
 //   btf-compress export CODEC --format schneider -o DIR
 #include "libbtf/compress/codec.h"
@@ -72,9 +73,10 @@ int main(int argc, char** argv) {
   CompressFlags cf;
   btf::CompressOptions& co = cf.options;
   app.add_option("DATASET", cf.dataset, "Input dataset (.h5, libbtf-dataset) or Bonn .btf file");
-  app.add_option("--method", cf.method, "pca-view | lpca");
+  app.add_option("--method", cf.method, "pca-view | lpca | fmf | dfmf (Bonn full-matrix factorisation, per YUV channel for dfmf)");
   app.add_option("--components,-c", co.components,
-                 "Components per view slot (pca-view) or per cluster (lpca); the maximum with --error/--energy");
+                 "Components per view slot (pca-view), per cluster (lpca) or of the SVD (fmf; per YUV channel for "
+                 "dfmf); the maximum with --error/--energy");
   app.add_option("--clusters,-k", co.clusters, "LPCA clusters");
   app.add_option("--error", co.target_error, "Target relative RMS error per slot/cluster (0 = use --components)");
   app.add_option("--energy", co.retained_energy, "Retained fraction of centred energy per slot/cluster (0 = off)");

@@ -1,10 +1,12 @@
 // btf-convert INPUT -o OUTPUT [--to dataset|bdi|fmf|dfmf|pvf]: any readable BTF (libbtf dataset or codec, Bonn
-// .btf) to a libbtf dataset or a Bonn BDI file, one view slot at a time (docs/btf-convert.md).
+// .btf) to a libbtf dataset or a Bonn BDI, FMF, DFMF or PVF file, one view slot at a time; a folder of images
+// (--layout) to a dataset (docs/btf-convert.md).
 #include "libbtf/compress/bonn_fmf.h"
 #include "libbtf/compress/bonn_pvf.h"
 #include "libbtf/compress/codec_source.h"
 #include "libbtf/core/atomic_file.h"
 #include "libbtf/io/convert.h"
+#include "libbtf/io/file_kind.h"
 #include "tools/common/cli.h"
 
 namespace {
@@ -18,10 +20,23 @@ struct ConvertFlags {
 int RunConvert(const CLI::App& app, const btf::cli::CommonFlags& common, const ConvertFlags& f) {
   // Options and the output format are checked before the input is read.
   const std::string target = btf::ConvertTarget(f.options, f.output);
+  if (!f.options.layout.empty()) {
+    btf::cli::PrintSummary(app, common,
+                           btf::ImportImageSet(f.options, f.input, f.output, btf::cli::MakeReporter(common)));
+    return 0;
+  }
   if (target == "fmf" || target == "dfmf") {
     btf::FmfWriteOptions o = f.fmf;
     o.decorrelate = target == "dfmf";
     o.Check();
+    if (btf::FileFormatOf(f.input) == btf::kCodecFormat) {
+      // An fmf / dfmf codec already holds the factors: written as they are.
+      const btf::Codec codec = btf::ReadCodec(f.input);
+      if (btf::MethodName(codec.method()) == target) {
+        btf::cli::PrintSummary(app, common, btf::WriteFmf(codec, f.input, f.output, btf::cli::MakeReporter(common)));
+        return 0;
+      }
+    }
     const auto input = btf::OpenSource(f.input);
     btf::cli::PrintSummary(app, common, btf::WriteFmf(o, *input, f.output, btf::cli::MakeReporter(common)));
     return 0;
@@ -48,7 +63,7 @@ int main(int argc, char** argv) {
   btf::cli::CommonFlags common;
   ConvertFlags f;
   btf::ConvertOptions& o = f.options;
-  app.add_option("INPUT", f.input, "Input: dataset (.h5), codec (.h5) or Bonn .btf file")->required();
+  app.add_option("INPUT", f.input, "Input: dataset (.h5), codec (.h5) or Bonn .btf file; a folder with --layout")->required();
   app.add_option("-o,--output", f.output, "Output file (.h5 = dataset, .btf = BDI unless --to)")->required();
   app.add_option("--to", o.to,
                  "Output format: dataset | bdi | fmf | dfmf | pvf (pvf from a pca-view codec; default: from the output's "
@@ -56,6 +71,13 @@ int main(int argc, char** argv) {
   app.add_option("--storage", o.storage, "Dataset output: float32 | float16");
   app.add_option("--deflate-level", o.deflate_level, "Dataset output: deflate level 0-9 (0 = none)");
   app.add_option("--scan-lines", o.scan_lines_per_chunk, "BDI output: texture rows per chunk");
+  app.add_option("--layout", o.layout,
+                 "INPUT is a folder of images: ubo2003 (NNNNN tlTTT plPPP tvTTT pvPPP.jpg, sRGB), atrium (the same "
+                 "names, .hdr) or pattern (--pattern); the output is a dataset");
+  app.add_option("--pattern", o.pattern,
+                 "--layout pattern: image path relative to the folder with fields {tv} {pv} {tl} {pl} (degrees), e.g. "
+                 "'tv{tv}_pv{pv}/tl{tl}_pl{pl}.exr'");
+  app.add_flag("--allow-missing", o.allow_missing, "Image sets: write missing (view, light) images as 0 instead of failing");
   app.add_option("--components,-c", f.fmf.components,
                  "FMF/DFMF output: components of the truncated SVD (per YUV channel for DFMF); clamped to the rank");
   app.add_option("--power-iterations", f.fmf.power_iterations, "FMF/DFMF output: power iterations of the randomised SVD");
