@@ -5,8 +5,9 @@
 #      dataset and a codec;
 #   2. PARTS, a comma-separated list of
 #        shared     tests/install/consumer, an external CMake project, configured with
-#                   find_package(libbtf) against PREFIX, built and run (shared libraries); a
-#                   missing input must give it btf::Error's message and exit code 4;
+#                   find_package(libbtf) against PREFIX, built and run (shared libraries; it
+#                   must neither look for nor link libbtf's private dependencies); a missing
+#                   input must give it btf::Error's message and exit code 4;
 #        static     the same with LIBBTF_USE_STATIC_LIBS=ON (static archives);
 #        pkgconfig  the same main.cpp built with the flags of `pkg-config libbtf` alone;
 #        python     the Python module imported from PREFIX (not the build tree) reads the dataset;
@@ -62,6 +63,11 @@ for kind in shared static; do
     { cat "$work/build-$kind.log" >&2; fail "find_package(libbtf) consumer ($kind) did not build"; }
   if [ $kind = shared ]; then
     readelf -d "$work/cmake-$kind/consumer" | grep -q 'NEEDED.*libbtf_core\.so' || fail "shared consumer does not load libbtf_core.so"
+    # Only the public dependencies reach it: libbtf's private ones were neither looked for nor linked.
+    ! grep -E '^(OpenCV|OpenImageIO|apriltag)_DIR' "$work/cmake-$kind/CMakeCache.txt" ||
+      fail "find_package(libbtf) with the shared libraries looked for a private dependency"
+    ! readelf -d "$work/cmake-$kind/consumer" | grep -E 'NEEDED.*(opencv|OpenImageIO|apriltag|gomp)' ||
+      fail "the shared consumer links a private dependency of libbtf"
   else
     ! readelf -d "$work/cmake-$kind/consumer" | grep -q 'NEEDED.*libbtf_' || fail "static consumer loads a libbtf shared library"
   fi
