@@ -7,6 +7,7 @@ run the same library code from the command line.
 """
 import json
 import os
+import signal
 import subprocess
 
 import numpy as np
@@ -225,6 +226,15 @@ def test_progress_callback_and_cancelling(data):
 
     with pytest.raises(ValueError, match="from the callback"):
         libbtf.compare(data["gt"], data["lpca"], progress=boom)
+
+    # Ctrl-C (SIGINT, Python's default handler) during the work: KeyboardInterrupt, nothing written.
+    def interrupt(*a):
+        os.kill(os.getpid(), signal.SIGINT)
+        return True
+
+    with pytest.raises(KeyboardInterrupt):
+        libbtf.compress(data["gt"], out, progress=interrupt)
+    assert not out.exists()
 
 
 def expect_error(category, code, fragment, fn, *args, **kw):
