@@ -46,7 +46,9 @@ set(CPACK_GENERATOR DEB)
 set(CPACK_DEBIAN_FILE_NAME DEB-DEFAULT)
 set(CPACK_DEBIAN_PACKAGE_SECTION science)
 set(CPACK_DEBIAN_PACKAGE_SHLIBDEPS ON)
-# Our own shared libraries link each other: dpkg-shlibdeps finds them in the package.
-set(CPACK_DEBIAN_PACKAGE_SHLIBDEPS_PRIVATE_DIRS ${CMAKE_INSTALL_LIBDIR})
+# Our own shared libraries link each other: dpkg-shlibdeps finds them in the package (a path
+# relative to the package root, where cpack runs it).
+string(REGEX REPLACE "^/" "" package_prefix "${CPACK_PACKAGING_INSTALL_PREFIX}")
+set(CPACK_DEBIAN_PACKAGE_SHLIBDEPS_PRIVATE_DIRS ${package_prefix}/${CMAKE_INSTALL_LIBDIR})
 set(CPACK_DEBIAN_PACKAGE_RECOMMENDS "libeigen3-dev, libfmt-dev, nlohmann-json3-dev, libhdf5-dev, python3, python3-numpy")
 include(CPack)

@@ -318,7 +318,10 @@ py::object Compare(const py::object& reference, const py::object& test, double p
   o.peak = peak;
   o.ssim_sigma = ssim_sigma;
   o.ssim = ssim;
-  if (error_maps) o.error_maps_dir = *error_maps;
+  if (error_maps) {  // as btf-eval compare --error-maps: the folder is created
+    o.error_maps_dir = *error_maps;
+    std::filesystem::create_directories(*error_maps);
+  }
   o.error_maps = maps;
   o.worst_images = worst_images;
   o.Check();

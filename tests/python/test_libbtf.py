@@ -195,6 +195,10 @@ def test_compare_matches_btf_eval(data):
     gt, lp = libbtf.open(data["gt"]).read_all().astype(np.float64), libbtf.open(data["lpca"]).read_all()
     assert by_path["rmse"] == pytest.approx(np.sqrt(np.mean((lp - gt) ** 2)), rel=1e-9)
     assert libbtf.compare(data["gt"], data["gt"])["rmse"] == 0
+    maps = data["dir"] / "maps"
+    s = libbtf.compare(data["gt"], data["lpca"], ssim=False, error_maps=maps, maps=2, worst_images=3)
+    assert len(s["worst_images"]) == 3 and len(s["error_maps"]) == 2
+    assert all(os.path.getsize(f) > 0 for f in s["error_maps"]) and maps.is_dir()
 
 
 def test_bonn_btf_file(data):
