@@ -4,7 +4,6 @@
 // the tools' message in a libbtf.Error carrying the tool's exit code.
 //
 // The GIL is held throughout: HDF5 is used from one thread at a time (libbtf/io/hdf5.h).
-#include <pybind11/functional.h>
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
@@ -20,7 +19,6 @@
 #include "libbtf/core/version.h"
 #include "libbtf/eval/metrics.h"
 #include "libbtf/io/bonn.h"
-#include "libbtf/io/dataset_io.h"
 #include "libbtf/io/file_kind.h"
 #include "libbtf/io/hdf5.h"
 
