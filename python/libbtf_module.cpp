@@ -81,6 +81,7 @@ class Source {
   }
 
   const btf::SlotSource& source() const { return *source_; }
+  const btf::Codec* codec() const { return codec_; }
   const std::filesystem::path& path() const { return path_; }
   const std::string& format() const { return format_; }
   bool is_codec() const { return codec_ != nullptr; }
@@ -210,6 +211,48 @@ class Source {
   std::unique_ptr<btf::SlotSource> source_;
   const btf::Codec* codec_ = nullptr;  // owned by source_ when the file is a codec
 };
+
+// A codec's stored coefficients as read-only NumPy arrays over the Codec's own memory (no copy);
+// each array keeps the Source `self` alive. Layouts: libbtf/compress/codec.h, docs/format.md.
+py::dict Coefficients(const py::object& self) {
+  const Source& src = self.cast<const Source&>();
+  if (!src.codec())
+    btf::ThrowUsage("'{}' is a {}, not a codec: only codecs have coefficients", src.path().string(), src.format());
+  const btf::Codec& c = *src.codec();
+  auto view = [&self](const auto& values, std::vector<py::ssize_t> shape) {
+    using T = typename std::decay_t<decltype(values)>::value_type;
+    py::array_t<T> a(shape, values.data(), self);
+    a.attr("setflags")(py::arg("write") = false);
+    return a;
+  };
+  const py::ssize_t V = c.num_views(), L = c.num_lights(), H = c.height(), W = c.width(), C = c.channels();
+  py::dict d;
+  d["method"] = btf::MethodName(c.method());
+  d["transform"] = c.transform() == btf::ValueTransform::kLog ? "log" : "none";
+  d["log_epsilon"] = c.log_epsilon();
+  if (c.method() == btf::CodecMethod::kPcaView) {
+    py::list slots;
+    for (const btf::PcaViewSlot& s : c.pca_view()) {
+      py::dict slot;
+      const py::ssize_t k = s.components;
+      slot["mean"] = view(s.mean, {H, W, C});
+      slot["basis"] = view(s.basis, {k, H, W, C});
+      slot["weights"] = view(s.weights, {L, k});
+      slot["eigenvalues"] = view(s.eigenvalues, {k});
+      slots.append(slot);
+    }
+    d["slots"] = slots;
+  } else {
+    const btf::LpcaModel& m = c.lpca();
+    const py::ssize_t k = m.clusters, n = m.components;
+    d["means"] = view(m.means, {k, V, L, C});
+    d["basis"] = view(m.basis, {k, n, V, L, C});
+    d["cluster_components"] = view(m.cluster_components, {k});
+    d["cluster_of"] = view(m.cluster_of, {H, W});
+    d["weights"] = view(m.weights, {H, W, n});
+  }
+  return d;
+}
 
 py::dict SamplingDict(const btf::Sampling& s) {
   py::array_t<double> dirs({py::ssize_t(s.size()), py::ssize_t(3)});
@@ -378,6 +421,7 @@ PYBIND11_MODULE(libbtf, m) {
       .def("decode", &Source::decode, py::arg("uv"), py::arg("wi"), py::arg("wo"), py::arg("filter") = "bilinear",
            "codec value at uv (N, 2), light wi (N, 3) and view wo (N, 3): float32 (N, channels)")
       .def("describe", &Source::describe, py::arg("stats") = false, "btf-info's summary as a dict")
+      .def("coefficients", &Coefficients, "codecs: the stored coefficients as read-only arrays (no copy)")
       .def("__repr__", [](const Source& s) {
         const auto& src = s.source();
         return "<libbtf.Source " + s.format() + " '" + s.path().string() + "' " + std::to_string(src.views().size()) +

@@ -156,6 +156,35 @@ def test_decode_at_uv_wi_wo(data):
     assert np.all(got >= texel.min(axis=0) - tol) and np.all(got <= texel.max(axis=0) + tol)
 
 
+def test_coefficients_are_views_that_rebuild_the_decoded_values(data):
+    # The formulas of libbtf/compress/codec.h, evaluated in NumPy on the stored coefficients, give
+    # the C++ decoders' values (float32 rounding in both: 1e-5 of the peak).
+    lpca = libbtf.open(data["lpca"])
+    co = lpca.coefficients()
+    assert co["method"] == "lpca" and co["transform"] == "none"
+    assert co["means"].shape == (2, len(VIEWS), len(LIGHTS), 3) and co["cluster_of"].shape == (N, N)
+    assert co["basis"].shape[:2] == (2, 3) and co["weights"].shape == (N, N, 3)
+    # No copy: read-only views of the codec's memory, the same buffer on every call.
+    assert not co["means"].flags.writeable and co["means"].base is not None
+    assert np.shares_memory(co["basis"], lpca.coefficients()["basis"])
+    ref = libbtf.open(data["decoded"]).read_all()
+    peak = float(np.abs(ref).max())
+    for y, x in ((0, 0), (5, 2), (N - 1, 3)):
+        k = co["cluster_of"][y, x]
+        value = co["means"][k] + np.tensordot(co["weights"][y, x], co["basis"][k], axes=1)
+        np.testing.assert_allclose(value, ref[:, :, y, x, :], rtol=0, atol=1e-5 * peak)
+    pca = libbtf.open(data["pca"])
+    slots = pca.coefficients()["slots"]
+    assert len(slots) == len(VIEWS)
+    for v, slot in enumerate(slots):
+        value = slot["mean"] + np.tensordot(slot["weights"], slot["basis"], axes=1)
+        np.testing.assert_allclose(value, pca.view_slot(v), rtol=0, atol=1e-5 * peak)
+    # The arrays keep the codec alive after the Source is gone.
+    basis = libbtf.open(data["lpca"]).coefficients()["basis"]
+    np.testing.assert_array_equal(basis, co["basis"])
+    expect_error("usage", 2, "not a codec", libbtf.open(data["gt"]).coefficients)
+
+
 def test_lossless_codec_reproduces_the_ground_truth(data):
     gt, pca = libbtf.open(data["gt"]).read_all(), libbtf.open(data["pca"]).read_all()
     # All lights - 1 components of each view slot: exact up to float32 rounding of the PCA.
