@@ -24,3 +24,23 @@ endif()
 if(BTF_BUILD_BENCHMARKS)
   find_package(benchmark REQUIRED)
 endif()
+# The Python module (python/, BTF_PYTHON): pybind11, the interpreter's headers and NumPy (Debian:
+# pybind11-dev, python3-dev, python3-numpy; python3-pytest runs its tests). ./run passes
+# -DPython3_EXECUTABLE=/usr/bin/python3, the interpreter those packages are for.
+set(BTF_PYTHON_FOUND OFF)
+if(NOT BTF_PYTHON STREQUAL "OFF")
+  set(required "")
+  if(BTF_PYTHON STREQUAL "ON")
+    set(required REQUIRED)
+  endif()
+  find_package(Python3 3.8 COMPONENTS Interpreter Development.Module NumPy ${required})
+  if(Python3_FOUND AND Python3_NumPy_FOUND)
+    find_package(pybind11 2.6 CONFIG ${required})
+  endif()
+  if(Python3_FOUND AND Python3_NumPy_FOUND AND pybind11_FOUND)
+    set(BTF_PYTHON_FOUND ON)
+  else()
+    message(STATUS "Python module libbtf: not built (needs pybind11-dev, python3-dev and python3-numpy for "
+                   "the interpreter '${Python3_EXECUTABLE}'; choose another with -DPython3_EXECUTABLE=...)")
+  endif()
+endif()

@@ -1,0 +1,449 @@
+// The Python module `libbtf` (docs/python.md): open a dataset, codec or Bonn .btf file, read it as
+// NumPy arrays, decode codecs at arbitrary (uv, wi, wo), compress and compare. A thin layer over
+// the library's public API: every number comes from the same code the tools run, every error is
+// the tools' message in a libbtf.Error carrying the tool's exit code.
+//
+// The GIL is held throughout: HDF5 is used from one thread at a time (libbtf/io/hdf5.h).
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+#include <pybind11/stl/filesystem.h>
+
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "libbtf/compress/codec.h"
+#include "libbtf/compress/codec_source.h"
+#include "libbtf/core/error.h"
+#include "libbtf/core/version.h"
+#include "libbtf/eval/metrics.h"
+#include "libbtf/io/bonn.h"
+#include "libbtf/io/file_kind.h"
+#include "libbtf/io/hdf5.h"
+
+namespace py = pybind11;
+
+namespace {
+
+using F32Array = py::array_t<float, py::array::c_style>;
+
+py::object ToPython(const nlohmann::json& j) { return py::module_::import("json").attr("loads")(j.dump()); }
+
+// The category names of docs/errors.md's exit codes, as libbtf.Error.category.
+const char* Category(btf::ExitCode code) {
+  switch (code) {
+    case btf::ExitCode::kOk: return "ok";
+    case btf::ExitCode::kFailedCheck: return "failed_check";
+    case btf::ExitCode::kUsage: return "usage";
+    case btf::ExitCode::kBadInput: return "bad_input";
+    case btf::ExitCode::kIo: return "io";
+    case btf::ExitCode::kInternal: return "internal";
+    case btf::ExitCode::kInterrupted: return "interrupted";
+  }
+  return "internal";
+}
+
+// A codec file as a SlotSource that also keeps the Codec for the decoders Value and DecodeAbrdf
+// (OpenCodecSource hides it).
+class CodecFile final : public btf::SlotSource {
+ public:
+  explicit CodecFile(const std::filesystem::path& path) : codec_(btf::ReadCodec(path)), name_(path.string()) {}
+  const btf::Codec& codec() const { return codec_; }
+  const std::string& name() const override { return name_; }
+  std::string kind() const override { return btf::kCodecFormat; }
+  const btf::Sampling& views() const override { return codec_.views(); }
+  const btf::Sampling& lights() const override { return codec_.lights(); }
+  int height() const override { return codec_.height(); }
+  int width() const override { return codec_.width(); }
+  int channels() const override { return codec_.channels(); }
+  btf::DatasetInfo info() const override { return codec_.info(); }
+  void ReadViewSlot(int view, float* out) const override { codec_.DecodeViewSlot(view, out); }
+  void ReadImage(int view, int light, float* out) const override { codec_.DecodeImage(view, light, out); }
+
+ private:
+  btf::Codec codec_;
+  std::string name_;
+};
+
+// libbtf.Source: one open file.
+class Source {
+ public:
+  explicit Source(const std::filesystem::path& path) : path_(path) {
+    format_ = btf::FileFormatOf(path);
+    if (format_ == btf::kCodecFormat) {
+      auto codec = std::make_unique<CodecFile>(path);
+      codec_ = &codec->codec();
+      source_ = std::move(codec);
+    } else {
+      source_ = btf::OpenSource(path);  // dataset or Bonn file; refuses other formats naming the file
+    }
+  }
+
+  const btf::SlotSource& source() const { return *source_; }
+  const btf::Codec* codec() const { return codec_; }
+  const std::filesystem::path& path() const { return path_; }
+  const std::string& format() const { return format_; }
+  bool is_codec() const { return codec_ != nullptr; }
+
+  py::tuple shape() const {
+    const auto& s = *source_;
+    return py::make_tuple(s.views().size(), s.lights().size(), s.height(), s.width(), s.channels());
+  }
+
+  py::dict conventions() const {
+    const btf::DatasetInfo info = source_->info();
+    py::dict d;
+    d["color_space"] = info.color_space;
+    d["units"] = info.units;
+    d["cos_theta_i_included"] = info.cos_theta_i_included;
+    d["channel_names"] = info.channel_names;
+    d["texel_size_mm"] = info.texel_size_mm;
+    d["provenance"] = ToPython(info.provenance);
+    return d;
+  }
+
+  F32Array view_slot(int view) const {
+    CheckIndex("view", view, source_->views().size());
+    const auto& s = *source_;
+    F32Array out({s.lights().size(), s.height(), s.width(), s.channels()});
+    s.ReadViewSlot(view, out.mutable_data());
+    return out;
+  }
+
+  F32Array image(int view, int light) const {
+    CheckIndex("view", view, source_->views().size());
+    CheckIndex("light", light, source_->lights().size());
+    const auto& s = *source_;
+    F32Array out({s.height(), s.width(), s.channels()});
+    s.ReadImage(view, light, out.mutable_data());
+    return out;
+  }
+
+  F32Array read_all() const {
+    const auto& s = *source_;
+    btf::CheckAllocation(double(s.slot_size()) * s.views().size() * sizeof(float), "'" + s.name() + "' read whole");
+    F32Array out({s.views().size(), s.lights().size(), s.height(), s.width(), s.channels()});
+    for (int v = 0; v < s.views().size(); ++v) s.ReadViewSlot(v, out.mutable_data() + v * s.slot_size());
+    return out;
+  }
+
+  // views x lights x channels. A codec decodes the texel alone; other files read every view slot.
+  F32Array abrdf(int y, int x) const {
+    const auto& s = *source_;
+    CheckIndex("y", y, s.height());
+    CheckIndex("x", x, s.width());
+    F32Array out({s.views().size(), s.lights().size(), s.channels()});
+    float* o = out.mutable_data();
+    if (codec_) {
+      const std::vector<float> a = codec_->DecodeAbrdf(y, x);
+      std::copy(a.begin(), a.end(), o);
+      return out;
+    }
+    std::vector<float> slot(s.slot_size());
+    const std::size_t texel = (std::size_t(y) * s.width() + x) * s.channels();
+    for (int v = 0; v < s.views().size(); ++v) {
+      s.ReadViewSlot(v, slot.data());
+      for (int l = 0; l < s.lights().size(); ++l)
+        for (int c = 0; c < s.channels(); ++c)
+          o[(std::size_t(v) * s.lights().size() + l) * s.channels() + c] = slot[l * s.image_size() + texel + c];
+    }
+    return out;
+  }
+
+  // Codec::Value at N points: uv (N, 2), wi and wo (N, 3), each also accepted as one row that is
+  // repeated. Returns (N, channels).
+  F32Array decode(const py::array_t<double, py::array::c_style | py::array::forcecast>& uv,
+                  const py::array_t<double, py::array::c_style | py::array::forcecast>& wi,
+                  const py::array_t<double, py::array::c_style | py::array::forcecast>& wo,
+                  const std::string& filter) const {
+    if (!codec_)
+      btf::ThrowUsage("'{}' is a {}, not a codec: decode() evaluates codecs; read datasets with image() or view_slot()",
+                      path_.string(), format_);
+    btf::UvFilter f = btf::UvFilter::kBilinear;
+    if (filter == "nearest")
+      f = btf::UvFilter::kNearest;
+    else if (filter != "bilinear")
+      btf::ThrowUsage("invalid option 'filter': '{}' (use 'bilinear' or 'nearest')", filter);
+    const py::ssize_t nu = Rows(uv, 2, "uv"), ni = Rows(wi, 3, "wi"), no = Rows(wo, 3, "wo");
+    const py::ssize_t n = std::max({nu, ni, no});
+    for (const auto& [rows, name] : {std::pair{nu, "uv"}, std::pair{ni, "wi"}, std::pair{no, "wo"}})
+      if (rows != n && rows != 1)
+        btf::ThrowUsage("decode: '{}' has {} rows but another argument has {}; give N rows (or one) each", name, rows, n);
+    F32Array out({n, py::ssize_t(codec_->channels())});
+    const double *pu = uv.data(), *pi = wi.data(), *po = wo.data();
+    const bool su = nu > 1, si = ni > 1, so = no > 1;
+    for (py::ssize_t k = 0; k < n; ++k) {
+      const double* u = pu + (su ? 2 * k : 0);
+      const double* i = pi + (si ? 3 * k : 0);
+      const double* o = po + (so ? 3 * k : 0);
+      codec_->Value(btf::Vec2(u[0], u[1]), btf::Vec3(i[0], i[1], i[2]), btf::Vec3(o[0], o[1], o[2]),
+                    out.mutable_data() + k * codec_->channels(), f);
+    }
+    return out;
+  }
+
+  // btf-info's summary (without the value scan unless stats).
+  py::object describe(bool stats) const {
+    if (codec_) {
+      nlohmann::json j = codec_->Describe();
+      j["path"] = path_.string();
+      return ToPython(j);
+    }
+    if (btf::IsBonnFormat(format_)) return ToPython(btf::DescribeBonnFile(path_, stats));
+    return ToPython(btf::DescribeDatasetFile(path_, stats));
+  }
+
+ private:
+  static void CheckIndex(const char* what, int i, int n) {
+    if (i < 0 || i >= n) btf::ThrowUsage("{} index {} is out of range [0, {})", what, i, n);
+  }
+  // Rows of an (N, cols) or (cols,) array; anything else is a usage error naming the argument.
+  static py::ssize_t Rows(const py::array_t<double, py::array::c_style | py::array::forcecast>& a, py::ssize_t cols,
+                          const char* name) {
+    if (a.ndim() == 1 && a.shape(0) == cols) return 1;
+    if (a.ndim() == 2 && a.shape(1) == cols) return a.shape(0);
+    btf::ThrowUsage("decode: '{}' must have shape (N, {}) or ({},)", name, cols, cols);
+  }
+
+  std::filesystem::path path_;
+  std::string format_;
+  std::unique_ptr<btf::SlotSource> source_;
+  const btf::Codec* codec_ = nullptr;  // owned by source_ when the file is a codec
+};
+
+// A codec's stored coefficients as read-only NumPy arrays over the Codec's own memory (no copy);
+// each array keeps the Source `self` alive. Layouts: libbtf/compress/codec.h, docs/format.md.
+py::dict Coefficients(const py::object& self) {
+  const Source& src = self.cast<const Source&>();
+  if (!src.codec())
+    btf::ThrowUsage("'{}' is a {}, not a codec: only codecs have coefficients", src.path().string(), src.format());
+  const btf::Codec& c = *src.codec();
+  auto view = [&self](const auto& values, std::vector<py::ssize_t> shape) {
+    using T = typename std::decay_t<decltype(values)>::value_type;
+    py::array_t<T> a(shape, values.data(), self);
+    a.attr("setflags")(py::arg("write") = false);
+    return a;
+  };
+  const py::ssize_t V = c.num_views(), L = c.num_lights(), H = c.height(), W = c.width(), C = c.channels();
+  py::dict d;
+  d["method"] = btf::MethodName(c.method());
+  d["transform"] = c.transform() == btf::ValueTransform::kLog ? "log" : "none";
+  d["log_epsilon"] = c.log_epsilon();
+  if (c.method() == btf::CodecMethod::kPcaView) {
+    py::list slots;
+    for (const btf::PcaViewSlot& s : c.pca_view()) {
+      py::dict slot;
+      const py::ssize_t k = s.components;
+      slot["mean"] = view(s.mean, {H, W, C});
+      slot["basis"] = view(s.basis, {k, H, W, C});
+      slot["weights"] = view(s.weights, {L, k});
+      slot["eigenvalues"] = view(s.eigenvalues, {k});
+      slots.append(slot);
+    }
+    d["slots"] = slots;
+  } else {
+    const btf::LpcaModel& m = c.lpca();
+    const py::ssize_t k = m.clusters, n = m.components;
+    d["means"] = view(m.means, {k, V, L, C});
+    d["basis"] = view(m.basis, {k, n, V, L, C});
+    d["cluster_components"] = view(m.cluster_components, {k});
+    d["cluster_of"] = view(m.cluster_of, {H, W});
+    d["weights"] = view(m.weights, {H, W, n});
+  }
+  return d;
+}
+
+py::dict SamplingDict(const btf::Sampling& s) {
+  py::array_t<double> dirs({py::ssize_t(s.size()), py::ssize_t(3)});
+  py::array_t<double> angles({py::ssize_t(s.size()), py::ssize_t(2)});
+  auto d = dirs.mutable_unchecked<2>();
+  auto a = angles.mutable_unchecked<2>();
+  for (int i = 0; i < s.size(); ++i) {
+    for (int k = 0; k < 3; ++k) d(i, k) = s[i][k];
+    a(i, 0) = s.angles(i).theta;
+    a(i, 1) = s.angles(i).phi;
+  }
+  py::dict out;
+  out["name"] = s.name();
+  out["directions"] = dirs;
+  out["angles"] = angles;
+  return out;
+}
+
+// A Reporter whose progress callback lets Ctrl-C stop the work (btf::Cancelled, raised as
+// KeyboardInterrupt) and forwards to the user's progress(done, total, stage) -> bool.
+struct PyReporter {
+  explicit PyReporter(std::optional<py::function> progress) : progress(std::move(progress)) {}
+  std::optional<py::function> progress;
+  bool interrupted = false;
+  std::optional<py::error_already_set> callback_error;
+
+  btf::Reporter Make() {
+    return btf::Reporter({}, [this](std::size_t done, std::size_t total, std::string_view stage) {
+      if (PyErr_CheckSignals() != 0) {
+        interrupted = true;
+        return false;
+      }
+      if (!progress) return true;
+      try {
+        py::object r = (*progress)(done, total, std::string(stage));
+        return r.is_none() || r.cast<bool>();
+      } catch (py::error_already_set& e) {
+        callback_error = std::move(e);
+        return false;
+      }
+    });
+  }
+  // After a btf::Cancelled: re-raise what stopped it.
+  void Rethrow() {
+    if (callback_error) throw std::move(*callback_error);
+    if (interrupted) throw py::error_already_set();  // the KeyboardInterrupt PyErr_CheckSignals set
+  }
+};
+
+// The tools' input choice for compression: a Bonn .btf file or a dataset file.
+std::unique_ptr<btf::SlotSource> OpenCompressInput(const std::filesystem::path& path) {
+  return btf::IsBonnFile(path) ? btf::OpenBonnSource(path) : btf::OpenDatasetSource(path);
+}
+
+py::object Compress(const std::filesystem::path& input, const std::filesystem::path& output, const std::string& method,
+                    int components, int clusters, double error, double energy, std::uint64_t seed, bool log,
+                    double log_epsilon, int max_iterations, double min_improvement,
+                    const std::optional<std::filesystem::path>& scene, const std::optional<py::function>& progress) {
+  btf::CompressOptions o;
+  o.method = btf::ParseMethod(method);
+  o.components = components;
+  o.clusters = clusters;
+  o.target_error = error;
+  o.retained_energy = energy;
+  o.seed = seed;
+  o.log_transform = log;
+  o.log_epsilon = log_epsilon;
+  o.max_iterations = max_iterations;
+  o.min_improvement = min_improvement;
+  if (scene) o.scene = btf::SceneSpec::Load(*scene);
+  o.Check();
+  // As btf-compress: claim the output first, so an unwritable folder fails before the work.
+  btf::AtomicOutput target(output);
+  target.Reserve();
+  const auto source = OpenCompressInput(input);
+  PyReporter reporter(progress);
+  btf::Codec codec;
+  btf::CompressSummary s;
+  try {
+    s = btf::Compress(o, *source, &codec, reporter.Make());
+  } catch (const btf::Cancelled&) {
+    reporter.Rethrow();
+    throw;
+  }
+  btf::WriteCodec(target, codec, "libbtf-python");
+  nlohmann::json j = s.ToJson();
+  j["output"] = output.string();
+  return ToPython(j);
+}
+
+py::object Compare(const py::object& reference, const py::object& test, double peak, double ssim_sigma, bool ssim,
+                   const std::optional<std::filesystem::path>& error_maps, int maps, int worst_images,
+                   const std::optional<py::function>& progress) {
+  // A libbtf.Source or a path (opened as btf-eval compare does).
+  auto resolve = [](const py::object& o, std::unique_ptr<Source>& owned) -> const btf::SlotSource& {
+    if (py::isinstance<Source>(o)) return o.cast<const Source&>().source();
+    owned = std::make_unique<Source>(o.cast<std::filesystem::path>());
+    return owned->source();
+  };
+  std::unique_ptr<Source> ref_owned, test_owned;
+  const btf::SlotSource& ref = resolve(reference, ref_owned);
+  const btf::SlotSource& tst = resolve(test, test_owned);
+  btf::CompareOptions o;
+  o.peak = peak;
+  o.ssim_sigma = ssim_sigma;
+  o.ssim = ssim;
+  if (error_maps) {  // as btf-eval compare --error-maps: the folder is created
+    o.error_maps_dir = *error_maps;
+    std::filesystem::create_directories(*error_maps);
+  }
+  o.error_maps = maps;
+  o.worst_images = worst_images;
+  o.Check();
+  PyReporter reporter(progress);
+  try {
+    return ToPython(btf::Compare(o, ref, tst, reporter.Make()).ToJson());
+  } catch (const btf::Cancelled&) {
+    reporter.Rethrow();
+    throw;
+  }
+}
+
+}  // namespace
+
+PYBIND11_MODULE(libbtf, m) {
+  m.doc() = "libbtf: BTF datasets, codecs and Bonn .btf files as NumPy arrays (docs/python.md)";
+  m.attr("__version__") = btf::Version();
+  btf::h5::SilenceErrors();
+
+  // libbtf.Error(message): .exit_code (docs/errors.md), .category ("usage", "bad_input", "io", ...).
+  static py::exception<btf::Error> error(m, "Error", PyExc_RuntimeError);
+  py::register_exception_translator([](std::exception_ptr p) {
+    try {
+      if (p) std::rethrow_exception(p);
+    } catch (const btf::Error& e) {
+      btf::ExitCode code = e.code();
+      std::string message = e.what();
+      // As the tools' handler: a file read as damaged after a failed read system call is an I/O error.
+      if (code == btf::ExitCode::kBadInput && btf::h5::IoErrorSeen()) {
+        code = btf::ExitCode::kIo;
+        message += " (after an I/O error reading it: failing disk or network file system?)";
+      }
+      py::object exc = py::handle(error)(message);
+      exc.attr("exit_code") = static_cast<int>(code);
+      exc.attr("category") = Category(code);
+      PyErr_SetObject(error.ptr(), exc.ptr());
+    }
+  });
+
+  py::class_<Source>(m, "Source", "An open dataset, codec or Bonn .btf file (libbtf.open)")
+      .def_property_readonly("path", [](const Source& s) { return s.path().string(); })
+      .def_property_readonly("format", &Source::format,
+                             "'libbtf-dataset', 'libbtf-codec', 'bonn-bdi', 'bonn-dfmf', 'bonn-fmf' or 'bonn-pvf'")
+      .def_property_readonly("is_codec", &Source::is_codec)
+      .def_property_readonly("shape", &Source::shape, "(views, lights, height, width, channels)")
+      .def_property_readonly("views", [](const Source& s) { return SamplingDict(s.source().views()); },
+                             "view sampling: {'name', 'directions' (n, 3), 'angles' (n, 2) theta, phi in radians}")
+      .def_property_readonly("lights", [](const Source& s) { return SamplingDict(s.source().lights()); },
+                             "light sampling, as views")
+      .def_property_readonly("conventions", &Source::conventions,
+                             "color_space, units, cos_theta_i_included, channel_names, texel_size_mm, provenance")
+      .def("view_slot", &Source::view_slot, py::arg("view"), "float32 (lights, height, width, channels)")
+      .def("image", &Source::image, py::arg("view"), py::arg("light"), "float32 (height, width, channels)")
+      .def("abrdf", &Source::abrdf, py::arg("y"), py::arg("x"), "float32 (views, lights, channels) of texel (y, x)")
+      .def("read_all", &Source::read_all, "float32 (views, lights, height, width, channels)")
+      .def("decode", &Source::decode, py::arg("uv"), py::arg("wi"), py::arg("wo"), py::arg("filter") = "bilinear",
+           "codec value at uv (N, 2), light wi (N, 3) and view wo (N, 3): float32 (N, channels)")
+      .def("describe", &Source::describe, py::arg("stats") = false, "btf-info's summary as a dict")
+      .def("coefficients", &Coefficients, "codecs: the stored coefficients as read-only arrays (no copy)")
+      .def("__repr__", [](const Source& s) {
+        const auto& src = s.source();
+        return "<libbtf.Source " + s.format() + " '" + s.path().string() + "' " + std::to_string(src.views().size()) +
+               "x" + std::to_string(src.lights().size()) + "x" + std::to_string(src.height()) + "x" +
+               std::to_string(src.width()) + "x" + std::to_string(src.channels()) + ">";
+      });
+
+  m.def("open", [](const std::filesystem::path& path) { return Source(path); }, py::arg("path"),
+        "Opens a libbtf dataset or codec file, or a Bonn .btf file");
+
+  const btf::CompressOptions co;
+  m.def("compress", &Compress, py::arg("input"), py::arg("output"), py::kw_only(),
+        py::arg("method") = btf::MethodName(co.method), py::arg("components") = co.components,
+        py::arg("clusters") = co.clusters, py::arg("error") = co.target_error, py::arg("energy") = co.retained_energy,
+        py::arg("seed") = co.seed, py::arg("log") = co.log_transform, py::arg("log_epsilon") = co.log_epsilon,
+        py::arg("max_iterations") = co.max_iterations, py::arg("min_improvement") = co.min_improvement,
+        py::arg("scene") = py::none(), py::arg("progress") = py::none(),
+        "btf-compress INPUT -o OUTPUT with the same options; returns its --json summary as a dict");
+
+  const btf::CompareOptions mo;
+  m.def("compare", &Compare, py::arg("reference"), py::arg("test"), py::kw_only(), py::arg("peak") = mo.peak,
+        py::arg("ssim_sigma") = mo.ssim_sigma, py::arg("ssim") = mo.ssim, py::arg("error_maps") = py::none(),
+        py::arg("maps") = mo.error_maps, py::arg("worst_images") = mo.worst_images, py::arg("progress") = py::none(),
+        "btf-eval compare REFERENCE TEST: error metrics as a dict (paths or libbtf.Source objects)");
+}
