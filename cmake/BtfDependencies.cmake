@@ -18,6 +18,21 @@ if(NOT TARGET btf_hdf5)
   target_link_libraries(btf_hdf5 INTERFACE ${HDF5_C_LIBRARIES})
   target_compile_definitions(btf_hdf5 INTERFACE ${HDF5_DEFINITIONS})
 endif()
+# MPI (Open MPI from Debian: libopenmpi-dev, openmpi-bin) for distributed runs (docs/scaling.md);
+# optional: without it every tool runs as one process.
+option(BTF_WITH_MPI "Distributed runs over MPI when MPI is found" ON)
+set(BTF_HAVE_MPI OFF)
+set(BTF_MPI_TARGET "")       # what btf_core links privately
+set(BTF_PC_MPI "")           # libbtf.pc Requires.private
+if(BTF_WITH_MPI)
+  find_package(MPI COMPONENTS CXX)
+  if(MPI_CXX_FOUND)
+    set(BTF_HAVE_MPI ON)
+    set(BTF_MPI_TARGET MPI::MPI_CXX)
+    set(BTF_PC_MPI ompi-cxx)
+  endif()
+endif()
+message(STATUS "libbtf: distributed runs over MPI: ${BTF_HAVE_MPI}")
 if(BTF_BUILD_TESTS)
   find_package(GTest REQUIRED)
 endif()

@@ -2,10 +2,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <numeric>
+#include <type_traits>
 #include <vector>
 
+#include "libbtf/core/distributed.h"
 #include "libbtf/core/error.h"
 #include "libbtf/core/error_stats.h"
 #include "libbtf/eval/annotate.h"
@@ -54,6 +57,27 @@ struct ImageStats {
   ErrorStats errors;  // max_abs_index: the worst value within the image
   double ssim = 0;
 };
+
+// Distributed compare: each rank measured the view slots it owns; afterwards every rank holds
+// every slot's statistics (raw bytes: ImageStats is plain data), so all ranks merge the same.
+void ShareImageStats(int V, int L, std::vector<ImageStats>* stats) {
+  static_assert(std::is_trivially_copyable_v<ImageStats>);
+  std::vector<std::uint8_t> mine;
+  for (int v = 0; v < V; ++v) {
+    if (!dist::Owns(v)) continue;
+    const auto* p = reinterpret_cast<const std::uint8_t*>(stats->data() + std::size_t(v) * L);
+    mine.insert(mine.end(), p, p + sizeof(ImageStats) * L);
+  }
+  const auto all = dist::AllGather(mine);
+  for (int r = 0; r < dist::Size(); ++r) {
+    std::size_t at = 0;
+    for (int v = r; v < V; v += dist::Size()) {
+      BTF_CHECK(at + sizeof(ImageStats) * L <= all[r].size());
+      std::memcpy(stats->data() + std::size_t(v) * L, all[r].data() + at, sizeof(ImageStats) * L);
+      at += sizeof(ImageStats) * L;
+    }
+  }
+}
 
 ImageStats MeasureImage(const float* ref, const float* test, int h, int w, int c, double peak, bool ssim,
                         double sigma) {
@@ -217,10 +241,12 @@ CompareSummary Compare(const CompareOptions& options, const SlotSource& ref, con
     double mx = 0;
     for (int v = 0; v < V; ++v) {
       reporter.Progress(v, V, "reference peak");
+      if (!dist::Owns(v)) continue;
       ref.ReadViewSlot(v, rslot.data());
       CheckFiniteSlot(ref, v, rslot.data());
       for (float x : rslot) mx = std::max(mx, std::abs(double(x)));
     }
+    mx = dist::AllMax(mx);
     reporter.Progress(V, V, "reference peak");
     if (mx > 0) {
       s.peak = mx;
@@ -238,6 +264,7 @@ CompareSummary Compare(const CompareOptions& options, const SlotSource& ref, con
   std::vector<ImageStats> stats(std::size_t(V) * L);
   for (int v = 0; v < V; ++v) {
     reporter.Progress(v, V, "compare");
+    if (!dist::Owns(v)) continue;
     ref.ReadViewSlot(v, rslot.data());
     test.ReadViewSlot(v, tslot.data());
     CheckFiniteSlot(ref, v, rslot.data());
@@ -248,8 +275,9 @@ CompareSummary Compare(const CompareOptions& options, const SlotSource& ref, con
                                                    s.peak, options.ssim, options.ssim_sigma);
   }
   reporter.Progress(V, V, "compare");
+  if (dist::Distributed()) ShareImageStats(V, L, &stats);
 
-  // Merge in a fixed order (deterministic sums).
+  // Merge in a fixed order (deterministic sums), the same on every rank and for any rank count.
   ErrorStats total;
   double ssim = 0;
   std::vector<ErrorStats> per_view(V), per_light(L);
@@ -283,8 +311,9 @@ CompareSummary Compare(const CompareOptions& options, const SlotSource& ref, con
   s.worst.assign(images.begin(), images.begin() + std::min<std::size_t>(images.size(), options.worst_images));
   s.times.Add("compare", timer.Seconds());
 
-  // Error maps of the worst images, on one common scale so their colors compare.
-  if (!options.error_maps_dir.empty() && options.error_maps > 0 && s.rmse > 0) {
+  // Error maps of the worst images, on one common scale so their colors compare (written by
+  // rank 0 alone in a distributed run).
+  if (!options.error_maps_dir.empty() && options.error_maps > 0 && s.rmse > 0 && dist::Rank() == 0) {
     timer.Restart();
     if (!std::filesystem::is_directory(options.error_maps_dir))
       ThrowIo("error-map folder '{}' does not exist: create it first", options.error_maps_dir.string());

@@ -1,8 +1,10 @@
 #include "libbtf/synth/btf_generator.h"
 
 #include <cmath>
+#include <memory>
 #include <vector>
 
+#include "libbtf/core/distributed.h"
 #include "libbtf/core/error.h"
 #include "libbtf/io/dataset_io.h"
 
@@ -193,21 +195,31 @@ BtfSummary WriteGeneratedBtf(const BtfOptions& o, const SvbrdfModel& model, cons
   Timer t;
   const auto uv = SamplePositions(o);
   times.Add("sample_positions", t.Seconds());
-  DatasetWriter writer(path, o.views, o.lights, N, N, model.channels(), info, wo);
+  // Distributed (docs/scaling.md): each rank renders the view slots it owns; rank 0 receives
+  // the others' slots in view order and alone writes the file. A slot does not depend on which
+  // rank renders it, so the file is the same for any number of ranks.
+  const bool root = dist::Rank() == 0;
+  std::unique_ptr<DatasetWriter> writer;
+  if (root) writer = std::make_unique<DatasetWriter>(path, o.views, o.lights, N, N, model.channels(), info, wo);
   std::vector<float> slot(static_cast<std::size_t>(o.lights.size()) * N * N * model.channels());
+  const std::size_t slot_bytes = slot.size() * sizeof(float);
   double eval_s = 0, write_s = 0;
   for (int v = 0; v < o.views.size(); ++v) {
     reporter.Progress(static_cast<std::size_t>(v), static_cast<std::size_t>(o.views.size()), "views");
     t.Restart();
-    FillViewSlot(model, o, uv, v, slot.data());
+    if (dist::Owns(v)) FillViewSlot(model, o, uv, v, slot.data());
     eval_s += t.Seconds();
     t.Restart();
-    writer.WriteViewSlot(v, slot.data());
+    if (!root && dist::Owns(v)) dist::Send(0, v, slot.data(), slot_bytes);
+    if (root) {
+      if (!dist::Owns(v)) dist::Recv(dist::Owner(v), v, slot.data(), slot_bytes);
+      writer->WriteViewSlot(v, slot.data());
+    }
     write_s += t.Seconds();
   }
   reporter.Progress(static_cast<std::size_t>(o.views.size()), static_cast<std::size_t>(o.views.size()), "views");
   t.Restart();
-  writer.Commit();
+  if (root) writer->Commit();
   write_s += t.Seconds();
   times.Add("evaluate", eval_s);
   times.Add("write", write_s);

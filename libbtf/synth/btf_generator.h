@@ -70,6 +70,8 @@ BtfSummary GenerateBtf(const BtfOptions& options, const SvbrdfModel& model, Data
                        const Reporter& reporter = {});
 
 // Streams the BTF to a dataset file view by view (Bonn-size jobs do not fit in memory), atomically.
+// In a distributed run (core/distributed.h) every rank calls it: ranks render the view slots they
+// own, rank 0 writes the file; the file is the same for any number of ranks.
 BtfSummary WriteGeneratedBtf(const BtfOptions& options, const SvbrdfModel& model, const std::filesystem::path& path,
                              const Reporter& reporter = {}, const nlohmann::json& extra_provenance = {});
 

@@ -11,7 +11,7 @@
 // differs between two runs of the same build or is tool metadata: wall-clock timings ("times_s",
 // "seconds_total",
 // "times", "seconds"), "creation_time", and the tool metadata "tool", "version", "schema_version",
-// "options" at the top level of a JSON file. Every other file (PNG, raw textures) is compared byte
+// "options", "ranks" at the top level of a JSON file. Every other file (PNG, raw textures) is compared byte
 // for byte.
 //
 // The digests hold for the compiler flags that ./run test builds with. Sanitizer instrumentation
@@ -201,7 +201,7 @@ std::string FileDigest(const fs::path& path) {
   Digest d;
   if (path.extension() == ".json") {
     nlohmann::json j = nlohmann::json::parse(ReplacePaths(bytes));
-    for (const char* k : {"tool", "version", "schema_version", "options"}) j.erase(k);
+    for (const char* k : {"tool", "version", "schema_version", "options", "ranks"}) j.erase(k);
     StripVolatile(j);
     d.Add(j.dump());
     return "json " + d.Hex();

@@ -27,6 +27,14 @@ nlohmann::json CheckEnvelope(const std::string& command, const std::string& tool
   EXPECT_EQ(j.value("version", ""), Version()) << command;
   EXPECT_EQ(j.value("schema_version", 0), kJsonSchemaVersion) << command;
   EXPECT_TRUE(j.contains("options") && j["options"].is_object()) << command;
+  // Outside mpirun: one rank, and its figures (docs/scaling.md).
+  EXPECT_EQ(j.value("ranks", 0), 1) << command;
+  EXPECT_EQ(j.value("per_rank", nlohmann::json::array()).size(), 1u) << command;
+  if (j.contains("per_rank") && !j["per_rank"].empty()) {
+    EXPECT_EQ(j["per_rank"][0].value("rank", -1), 0) << command;
+    EXPECT_GT(j["per_rank"][0].value("peak_rss_bytes", 0.0), 0) << command;
+    EXPECT_GE(j["per_rank"][0].value("seconds", -1.0), 0) << command;
+  }
   return j;
 }
 

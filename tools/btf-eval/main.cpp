@@ -42,9 +42,9 @@ int RunCompare(const CLI::App& app, const btf::cli::CommonFlags& common, Compare
       verdict = "fail";
     else if (f.warn && worse(value, *f.warn))
       verdict = "warn";
-    if (verdict == "warn")
+    if (verdict == "warn" && btf::cli::PrintingRank())
       reporter.Warn("{} = {:.6g} is worse than the warning threshold {:.6g}", f.metric, value, *f.warn);
-    if (verdict == "fail")
+    if (verdict == "fail" && btf::cli::PrintingRank())
       reporter.Warn("{} = {:.6g} is worse than the failure threshold {:.6g}: exit 1", f.metric, value, *f.fail);
   }
   btf::cli::PrintSummary(app, common, s,
@@ -52,7 +52,7 @@ int RunCompare(const CLI::App& app, const btf::cli::CommonFlags& common, Compare
                           {"warn", f.warn ? nlohmann::json(*f.warn) : nlohmann::json(nullptr)},
                           {"fail", f.fail ? nlohmann::json(*f.fail) : nlohmann::json(nullptr)},
                           {"verdict", verdict}});
-  if (!common.json) fmt::print("verdict    {}\n", verdict);
+  if (!common.json && btf::cli::PrintingRank()) fmt::print("verdict    {}\n", verdict);
   return verdict == "fail" ? static_cast<int>(btf::ExitCode::kFailedCheck) : 0;
 }
 
@@ -102,6 +102,7 @@ int main(int argc, char** argv) {
   compare->add_option("--error-maps", cf.maps_dir, "Write false-color error maps of the worst images to this folder");
   compare->add_option("--maps", cf.options.error_maps, "Number of error maps");
   btf::cli::AddCommonFlags(*compare, common);
+  btf::cli::MarkDistributed(compare);
 
   SweepFlags sf;
   btf::SweepOptions& so = sf.options;

@@ -85,7 +85,7 @@ int RunBtf(const CLI::App& app, const btf::cli::CommonFlags& common, BtfFlags& f
                 f.options.lights.size(), f.options.resolution, f.options.samples);
   const btf::BtfSummary sum = btf::WriteGeneratedBtf(f.options, *model, f.output, reporter);
   btf::cli::PrintSummary(app, common, sum, {{"output", f.output}, {"model", model->name()}});
-  if (!common.json) fmt::print("{} -> {}\n", model->name(), f.output);
+  if (!common.json && btf::cli::PrintingRank()) fmt::print("{} -> {}\n", model->name(), f.output);
   return 0;
 }
 
@@ -161,6 +161,7 @@ int main(int argc, char** argv) {
   cb->add_option("--seed", bo.seed, "Jitter seed");
   cb->add_option("--irregularity", bo.irregularity, "RMS displacement of the thread pattern, tiles");
   cb->add_option("-o,--output", bf.output, "Output dataset (.h5)")->required();
+  btf::cli::MarkDistributed(cb);
 
   // brdf
   BrdfFlags rf;

@@ -6,11 +6,13 @@
 #include <cstdio>
 #include <iostream>
 #include <mutex>
+#include <set>
 
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
 #include "libbtf/core/atomic_file.h"
+#include "libbtf/core/distributed.h"
 #include "libbtf/core/error.h"
 #include "libbtf/io/hdf5.h"
 #include "libbtf/core/version.h"
@@ -77,9 +79,11 @@ class ProgressDisplay {
 }  // namespace
 
 Reporter MakeReporter(const CommonFlags& flags) {
-  // --quiet keeps warnings and errors only; --verbose adds debug lines.
-  spdlog::set_level(flags.quiet ? spdlog::level::warn : flags.verbose ? spdlog::level::debug : spdlog::level::info);
-  auto display = std::make_shared<ProgressDisplay>(flags.quiet);
+  // --quiet keeps warnings and errors only; --verbose adds debug lines. In a distributed run only
+  // rank 0 shows progress and info lines; every rank's warnings are shown, tagged with the rank.
+  const bool quiet = flags.quiet || !PrintingRank();
+  spdlog::set_level(quiet ? spdlog::level::warn : flags.verbose ? spdlog::level::debug : spdlog::level::info);
+  auto display = std::make_shared<ProgressDisplay>(quiet);
   return Reporter(
       [](LogLevel level, std::string_view msg) {
         switch (level) {
@@ -163,47 +167,102 @@ nlohmann::json JsonDocument(const CLI::App& app, const nlohmann::json& summary) 
   nlohmann::json j = {{"tool", app.get_name()},
                       {"version", Version()},
                       {"schema_version", kJsonSchemaVersion},
-                      {"options", EffectiveOptions(app)}};
+                      {"options", EffectiveOptions(app)},
+                      {"ranks", dist::Size()}};
   for (const auto& [k, v] : summary.items()) j[k] = v;
   return j;
 }
 
-void PrintJson(const CLI::App& app, const nlohmann::json& summary) {
-  std::cout << JsonDocument(app, summary).dump(2) << std::endl;
+namespace {
+std::set<const CLI::App*>& DistributedCommands() {
+  static std::set<const CLI::App*> commands;
+  return commands;
+}
+std::chrono::steady_clock::time_point g_start = std::chrono::steady_clock::now();
+
+// Refuses a command that does not split its work when more than one rank runs it.
+void CheckDistributable(const CLI::App& app) {
+  if (!dist::Distributed()) return;
+  const CLI::App* command = &app;
+  while (!command->get_subcommands().empty()) command = command->get_subcommands().front();
+  for (const CLI::App* c = command; c; c = c->get_parent())
+    if (DistributedCommands().count(c)) return;
+  ThrowUsage("'{}' does not run distributed, but {} MPI ranks started it: run it without mpirun (docs/scaling.md "
+             "lists the distributed commands)",
+             command == &app ? app.get_name() : app.get_name() + " " + command->get_name(), dist::Size());
 }
 
-int Main(int argc, char** argv, CLI::App& app, const std::function<int()>& run) {
+// In a distributed run every message names the rank that reports it.
+std::string RankTag() {
+  return dist::Distributed() ? fmt::format("rank {} of {}: ", dist::Rank(), dist::Size()) : std::string();
+}
+}  // namespace
+
+void MarkDistributed(CLI::App* command) { DistributedCommands().insert(command); }
+
+bool PrintingRank() { return dist::Rank() == 0; }
+
+void PrintJson(const CLI::App& app, const nlohmann::json& summary) {
+  nlohmann::json doc = JsonDocument(app, summary);
+  doc["per_rank"] = dist::GatherRankStats(std::chrono::duration<double>(std::chrono::steady_clock::now() - g_start).count());
+  if (PrintingRank()) std::cout << doc.dump(2) << std::endl;
+}
+
+namespace {
+// "<tool>: error: [rank r of N: ]message" on stderr.
+void PrintError(const CLI::App& app, const char* kind, const std::string& message) {
+  std::fprintf(stderr, "%s: %s: %s%s\n", app.get_name().c_str(), kind, RankTag().c_str(), message.c_str());
+}
+
+int RunTool(int argc, char** argv, CLI::App& app, const std::function<int()>& run) {
   InstallSignalCleanup();
   auto logger = spdlog::stderr_color_mt("btf");
-  logger->set_pattern(std::string(app.get_name()) + ": %^%l%$: %v");
-  spdlog::set_default_logger(logger);
   try {
+    dist::Init(&argc, &argv);
+    logger->set_pattern(std::string(app.get_name()) + ": %^%l%$: " + RankTag() + "%v");
+    spdlog::set_default_logger(logger);
     try {
       app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
-      const int rc = app.exit(e);  // prints help or the parse error
+      // Every rank parses the same command line: rank 0 alone prints help or the error.
+      const int rc = PrintingRank() ? app.exit(e) : (e.get_exit_code() == 0 ? 0 : 1);
       return rc == 0 ? 0 : static_cast<int>(ExitCode::kUsage);
     }
+    CheckDistributable(app);
     return run();
   } catch (const Error& e) {
     // A file read as damaged after a failed read system call is a failing disk, not bad data.
     if (e.code() == ExitCode::kBadInput && h5::IoErrorSeen()) {
-      std::fprintf(stderr, "%s: error: %s (after an I/O error reading it: failing disk or network file system?)\n",
-                   app.get_name().c_str(), e.what());
+      PrintError(app, "error", fmt::format("{} (after an I/O error reading it: failing disk or network file system?)",
+                                           e.what()));
       return static_cast<int>(ExitCode::kIo);
     }
-    if (e.code() == ExitCode::kInternal)
-      std::fprintf(stderr, "%s: internal error: %s (please report this)\n", app.get_name().c_str(), e.what());
-    else
-      std::fprintf(stderr, "%s: error: %s\n", app.get_name().c_str(), e.what());
+    // A usage error is the same on every rank: rank 0 alone prints it.
+    if (e.code() != ExitCode::kUsage || PrintingRank())
+      PrintError(app, e.code() == ExitCode::kInternal ? "internal error" : "error",
+                 e.code() == ExitCode::kInternal ? fmt::format("{} (please report this)", e.what()) : e.what());
     return static_cast<int>(e.code());
   } catch (const std::bad_alloc&) {
-    std::fprintf(stderr, "%s: error: out of memory; use a smaller input or subset\n", app.get_name().c_str());
+    PrintError(app, "error", "out of memory; use a smaller input or subset");
     return static_cast<int>(ExitCode::kIo);
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "%s: internal error: %s (please report this)\n", app.get_name().c_str(), e.what());
+    PrintError(app, "internal error", fmt::format("{} (please report this)", e.what()));
     return static_cast<int>(ExitCode::kInternal);
   }
+}
+}  // namespace
+
+int Main(int argc, char** argv, CLI::App& app, const std::function<int()>& run) {
+  const int rc = RunTool(argc, argv, app, run);
+  std::fflush(stdout);
+  // A rank that fails ends the whole job (the other ranks may wait for its data); its message,
+  // tagged with the rank, is already on stderr. A usage error or a failed threshold is the same
+  // on every rank and needs no abort.
+  if (dist::Distributed() && rc != 0 && rc != static_cast<int>(ExitCode::kUsage) &&
+      rc != static_cast<int>(ExitCode::kFailedCheck))
+    dist::AbortJob(rc);
+  dist::Finalize();
+  return rc;
 }
 
 std::vector<int> ParseIndexList(const std::string& text, const std::string& option) {

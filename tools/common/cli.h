@@ -35,8 +35,16 @@ Reporter MakeReporter(const CommonFlags& flags);
 // subcommands nest under their name. Common flags (--json, --quiet, ...) are left out.
 nlohmann::json EffectiveOptions(const CLI::App& app);
 
-// Prints one --json document on stdout: {"tool", "version", "schema_version", "options"} followed
-// by the summary's keys (docs/architecture.md, "JSON output").
+// Marks a command (a subcommand, or the app itself) as one that splits its work over MPI ranks
+// (docs/scaling.md). Started under an MPI launcher with more than one rank, any other command
+// refuses to run: N copies of a single-process command would each do all the work and race on
+// its outputs.
+void MarkDistributed(CLI::App* command);
+
+// Prints one --json document on stdout: {"tool", "version", "schema_version", "options",
+// "ranks", "per_rank"} followed by the summary's keys (docs/architecture.md, "JSON output");
+// "per_rank" lists each rank's seconds and peak memory (one entry outside a distributed run). In
+// a distributed run it is collective: every rank calls it, rank 0 prints.
 void PrintJson(const CLI::App& app, const nlohmann::json& summary);
 
 // The document PrintJson prints.
@@ -50,7 +58,10 @@ int Main(int argc, char** argv, CLI::App& app, const std::function<int()>& run);
 // Parses "1,2,5-7" into indices.
 std::vector<int> ParseIndexList(const std::string& text, const std::string& option);
 
-// Prints a summary: its text report, or with --json the JSON document.
+// True on the rank that prints results (rank 0; the only rank outside a distributed run).
+bool PrintingRank();
+
+// Prints a summary: its text report, or with --json the JSON document (collective, as PrintJson).
 template <typename Summary>
 void PrintSummary(const CLI::App& app, const CommonFlags& flags, const Summary& summary,
                   const nlohmann::json& extra = nlohmann::json::object()) {
@@ -58,7 +69,7 @@ void PrintSummary(const CLI::App& app, const CommonFlags& flags, const Summary& 
     nlohmann::json j = summary.ToJson();
     j.update(extra);
     PrintJson(app, j);
-  } else {
+  } else if (PrintingRank()) {
     std::fputs(summary.Report().c_str(), stdout);
   }
 }
