@@ -21,6 +21,14 @@ CodecMethod ParseMethod(const std::string& name) {
   ThrowUsage("unknown compression method '{}' (use pca-view or lpca)", name);
 }
 
+std::string StorageName(CodecStorage storage) { return storage == CodecStorage::kHalf ? "half" : "float"; }
+
+CodecStorage ParseStorage(const std::string& name) {
+  if (name == "float") return CodecStorage::kFloat;
+  if (name == "half") return CodecStorage::kHalf;
+  ThrowUsage("unknown coefficient storage '{}' (use float or half)", name);
+}
+
 void CompressOptions::Check() const {
   BTF_CHECK_OPTION(components >= 1 && components <= 4096, "components", "must be 1..4096");
   BTF_CHECK_OPTION(clusters >= 1 && clusters <= 65535, "clusters", "must be 1..65535");
@@ -39,12 +47,13 @@ nlohmann::json CompressOptions::ToJson() const {
           {"retained_energy", retained_energy}, {"seed", seed},
           {"log_transform", log_transform}, {"log_epsilon", log_epsilon},
           {"max_iterations", max_iterations}, {"min_improvement", min_improvement},
-          {"gram_limit", gram_limit}};
+          {"gram_limit", gram_limit},       {"storage", StorageName(storage)}};
 }
 
 nlohmann::json CompressSummary::ToJson() const {
   nlohmann::json j;
   j["method"] = method;
+  j["storage"] = storage;
   j["input"] = input;
   j["shape"] = {{"views", views}, {"lights", lights}, {"height", height}, {"width", width}, {"channels", channels}};
   j["components"] = components;
@@ -86,7 +95,7 @@ std::string CompressSummary::Report() const {
     r += fmt::format("  clusters x components {} x {} (max per cluster)\n", clusters, components);
   else
     r += fmt::format("  components            {} (max per view slot)\n", components);
-  r += fmt::format("  codec size            {} (coefficients)\n", FormatBytes(codec_bytes));
+  r += fmt::format("  codec size            {} (coefficients, {} storage)\n", FormatBytes(codec_bytes), storage);
   r += fmt::format("  ratio                 {:.2f}:1 vs float32 raw ({}), {:.2f}:1 vs half raw ({})\n", ratio_float32,
                    FormatBytes(raw_float32_bytes), ratio_half, FormatBytes(raw_half_bytes));
   r += fmt::format("  RMSE                  {:.6g}\n", rmse);
@@ -120,14 +129,14 @@ Codec CodecBuilder::Make(CodecMethod method, Sampling views, Sampling lights, in
 }
 
 std::uint64_t Codec::StoredBytes() const {
-  std::uint64_t values = 0;
+  std::uint64_t floats = 0, ints = 0;
   if (method_ == CodecMethod::kPcaView) {
-    for (const auto& s : slots_) values += s.mean.size() + s.basis.size() + s.weights.size();
+    for (const auto& s : slots_) floats += s.mean.size() + s.basis.size() + s.weights.size();
   } else {
-    values = lpca_.means.size() + lpca_.basis.size() + lpca_.weights.size() + lpca_.cluster_of.size() +
-             lpca_.cluster_components.size();
+    floats = lpca_.means.size() + lpca_.basis.size() + lpca_.weights.size();
+    ints = lpca_.cluster_of.size() + lpca_.cluster_components.size();
   }
-  return values * 4;
+  return floats * (storage_ == CodecStorage::kHalf ? 2 : 4) + ints * 4;
 }
 
 std::uint64_t Codec::RawBytes(int bytes_per_value) const {
@@ -183,18 +192,35 @@ void Codec::DecodeViewSlot(int view, float* out) const {
       o.rowwise() = mean.transpose();
     }
   } else {
+    // Per block of kTexels texels: their L*C values of this view into a per-thread buffer
+    // (mean + weighted basis rows, contiguous), then written out light by light (contiguous
+    // runs of kTexels*C values). No allocation per texel.
     const LpcaModel& m = lpca_;
     const std::size_t d = abrdf_size(), seg = std::size_t(L) * C, base = std::size_t(view) * seg;
-#pragma omp parallel for schedule(static)
-    for (std::ptrdiff_t ti = 0; ti < static_cast<std::ptrdiff_t>(T); ++ti) {
-      const std::size_t t = static_cast<std::size_t>(ti);
-      const int k = m.cluster_of[t];
-      Eigen::VectorXf v = Eigen::Map<const Eigen::VectorXf>(&m.means[std::size_t(k) * d + base], seg);
-      for (int j = 0; j < m.cluster_components[static_cast<std::size_t>(k)]; ++j)
-        v += m.weights[t * m.components + j] *
-             Eigen::Map<const Eigen::VectorXf>(&m.basis[(std::size_t(k) * m.components + j) * d + base], seg);
-      for (int l = 0; l < L; ++l)
-        for (int ch = 0; ch < C; ++ch) out[(std::size_t(l) * T + t) * C + ch] = v[l * C + ch];
+    constexpr std::size_t kTexels = 64;
+    const std::ptrdiff_t blocks = static_cast<std::ptrdiff_t>((T + kTexels - 1) / kTexels);
+#pragma omp parallel
+    {
+      std::vector<float> buf(kTexels * seg);
+#pragma omp for schedule(static)
+      for (std::ptrdiff_t b = 0; b < blocks; ++b) {
+        const std::size_t t0 = std::size_t(b) * kTexels, nt = std::min(kTexels, T - t0);
+        for (std::size_t i = 0; i < nt; ++i) {
+          const std::size_t t = t0 + i;
+          const int k = m.cluster_of[t];
+          Eigen::Map<Eigen::VectorXf> v(&buf[i * seg], static_cast<Eigen::Index>(seg));
+          v = Eigen::Map<const Eigen::VectorXf>(&m.means[std::size_t(k) * d + base], static_cast<Eigen::Index>(seg));
+          for (int j = 0; j < m.cluster_components[static_cast<std::size_t>(k)]; ++j)
+            v += m.weights[t * m.components + j] *
+                 Eigen::Map<const Eigen::VectorXf>(&m.basis[(std::size_t(k) * m.components + j) * d + base],
+                                                   static_cast<Eigen::Index>(seg));
+        }
+        for (int l = 0; l < L; ++l) {
+          float* o = out + (std::size_t(l) * T + t0) * C;
+          for (std::size_t i = 0; i < nt; ++i)
+            for (int ch = 0; ch < C; ++ch) o[i * C + ch] = buf[i * seg + std::size_t(l) * C + ch];
+        }
+      }
     }
   }
   if (transform_ != ValueTransform::kNone) {
@@ -319,6 +345,7 @@ nlohmann::json Codec::Describe() const {
     j["clusters"] = lpca_.clusters;
     j["components"] = lpca_.components;
   }
+  j["storage"] = StorageName(storage_);
   j["stored_bytes"] = StoredBytes();
   j["raw_float32_bytes"] = RawBytes(4);
   j["raw_half_bytes"] = RawBytes(2);

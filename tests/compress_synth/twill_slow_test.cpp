@@ -2,7 +2,10 @@
 // Slow (the generation alone takes about a minute on 2 cores): label "slow".
 #include <gtest/gtest.h>
 
+#include <Eigen/SVD>
 #include <cmath>
+#include <limits>
+#include <random>
 
 #include "libbtf/compress/codec.h"
 #include "libbtf/export/schneider.h"
@@ -100,6 +103,114 @@ TEST(TwillDoneWhen, Lpca32x8RoundTripsAndMoreComponentsNeverHurt) {
         for (int ch = 0; ch < 3; ++ch) EXPECT_LE(std::abs(a[ch] - b[ch]), bound + 1e-5);
       }
   }
+}
+
+// Issue 15 "done when": the reference written plainly. Texel-major matrix (N x d), k-means++
+// seeds (seed 1), Lloyd k-means until no texel moves (explicit distance loops, double sums), then
+// Kambhatla & Leen's local PCA (VQPCA): per cluster a full SVD of the centred members, each texel
+// to the cluster whose c-dimensional affine subspace is nearest, until no texel moves or the
+// error stops falling. Returns the relative error sqrt(sum residual^2 / sum x^2).
+double PlainLloydThenLocalPca(const Dataset& d, int K, int c) {
+  const int N = d.height() * d.width(), D = static_cast<int>(d.abrdf_size());
+  using RowMatrixXd = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  RowMatrixXd A(N, D);
+  for (int y = 0; y < d.height(); ++y)
+    for (int x = 0; x < d.width(); ++x) {
+      const auto a = d.Abrdf(y, x);
+      for (int i = 0; i < D; ++i) A(y * d.width() + x, i) = a[static_cast<std::size_t>(i)];
+    }
+  const double energy = A.squaredNorm();
+  std::mt19937_64 rng(1);
+  RowMatrixXd centers(K, D);
+  std::vector<double> nearest(static_cast<std::size_t>(N), std::numeric_limits<double>::infinity());
+  int pick = static_cast<int>(rng() % std::uint64_t(N));
+  for (int k = 0; k < K; ++k) {
+    centers.row(k) = A.row(pick);
+    double sum = 0;
+    for (int i = 0; i < N; ++i) sum += nearest[i] = std::min(nearest[i], (A.row(i) - centers.row(k)).squaredNorm());
+    double u = std::uniform_real_distribution<double>(0, sum)(rng);
+    for (pick = 0; pick + 1 < N && (u -= nearest[pick]) > 0; ++pick) {
+    }
+  }
+  std::vector<int> assign(static_cast<std::size_t>(N), -1);
+  for (bool moved = true; moved;) {
+    moved = false;
+#pragma omp parallel for reduction(|| : moved)
+    for (int i = 0; i < N; ++i) {
+      int best = 0;
+      double best_d = std::numeric_limits<double>::infinity();
+      for (int k = 0; k < K; ++k) {
+        const double dist = (A.row(i) - centers.row(k)).squaredNorm();
+        if (dist < best_d) best_d = dist, best = k;
+      }
+      moved = moved || best != assign[i];
+      assign[i] = best;
+    }
+    for (int k = 0; k < K; ++k) {
+      Eigen::RowVectorXd sum = Eigen::RowVectorXd::Zero(D);
+      int count = 0;
+      for (int i = 0; i < N; ++i)
+        if (assign[i] == k) sum += A.row(i), ++count;
+      if (count) centers.row(k) = sum / count;
+    }
+  }
+  double error = std::numeric_limits<double>::infinity();
+  for (int round = 0; round < 100; ++round) {
+    std::vector<Eigen::RowVectorXd> mean(static_cast<std::size_t>(K));
+    std::vector<Eigen::MatrixXd> basis(static_cast<std::size_t>(K));  // c x D
+    double residual = 0;
+    for (int k = 0; k < K; ++k) {
+      std::vector<int> m;
+      for (int i = 0; i < N; ++i)
+        if (assign[i] == k) m.push_back(i);
+      if (m.empty()) continue;
+      Eigen::MatrixXd X(static_cast<Eigen::Index>(m.size()), D);
+      for (std::size_t i = 0; i < m.size(); ++i) X.row(Eigen::Index(i)) = A.row(m[i]);
+      mean[k] = X.colwise().mean();
+      X.rowwise() -= mean[k];
+      Eigen::BDCSVD<Eigen::MatrixXd> svd(X, Eigen::ComputeThinV);
+      const int ck = std::min<int>(c, static_cast<int>(svd.singularValues().size()));
+      basis[k] = svd.matrixV().leftCols(ck).transpose();
+      for (Eigen::Index j = ck; j < svd.singularValues().size(); ++j)
+        residual += svd.singularValues()[j] * svd.singularValues()[j];
+    }
+    const double e = std::sqrt(residual / energy);
+    if (!(e < error * (1 - 1e-6))) return std::min(e, error);
+    error = e;
+    bool moved = false;
+#pragma omp parallel for reduction(|| : moved)
+    for (int i = 0; i < N; ++i) {
+      double best = std::numeric_limits<double>::infinity();
+      int arg = assign[i];
+      for (int k = 0; k < K; ++k) {
+        if (basis[k].size() == 0) continue;
+        const Eigen::RowVectorXd x = A.row(i) - mean[k];
+        const double r = x.squaredNorm() - (basis[k] * x.transpose()).squaredNorm();
+        if (r < best) best = r, arg = k;
+      }
+      moved = moved || arg != assign[i];
+      assign[i] = arg;
+    }
+    if (!moved) return error;
+  }
+  return error;
+}
+
+TEST(TwillDoneWhen, Lpca32x8IsNoWorseThanConvergedLloydPlusLocalPca) {
+  const Dataset& d = Twill();
+  CompressOptions o;
+  o.method = CodecMethod::kLpca;
+  o.clusters = 32;
+  o.components = 8;
+  CompressSummary s;
+  test::CompressDataset(d, o, &s);
+  const double reference = PlainLloydThenLocalPca(d, 32, 8);
+  RecordProperty("lpca_relative_error", std::to_string(s.relative_error));
+  RecordProperty("reference_relative_error", std::to_string(reference));
+  std::printf("lpca k 32 c 8: ours %.6f, plain Lloyd + Kambhatla-Leen %.6f\n", s.relative_error, reference);
+  // Ours is a float codec measured after decoding, the reference exact double arithmetic: the
+  // float rounding of a ~1 value is ~1e-7 relative, far below 1e-4; so "no worse" within 1e-4.
+  EXPECT_LE(s.relative_error, reference + 1e-4);
 }
 
 }  // namespace
