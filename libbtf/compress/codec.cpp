@@ -201,14 +201,16 @@ void Codec::DecodeViewSlot(int view, float* out) const {
     const std::ptrdiff_t blocks = static_cast<std::ptrdiff_t>((T + kTexels - 1) / kTexels);
 #pragma omp parallel
     {
-      std::vector<float> buf(kTexels * seg);
+      // Eigen-aligned: Eigen peels to the destination's alignment, so the values do not depend
+      // on where malloc put the buffer.
+      Eigen::VectorXf buf(static_cast<Eigen::Index>(kTexels * seg));
 #pragma omp for schedule(static)
       for (std::ptrdiff_t b = 0; b < blocks; ++b) {
         const std::size_t t0 = std::size_t(b) * kTexels, nt = std::min(kTexels, T - t0);
         for (std::size_t i = 0; i < nt; ++i) {
           const std::size_t t = t0 + i;
           const int k = m.cluster_of[t];
-          Eigen::Map<Eigen::VectorXf> v(&buf[i * seg], static_cast<Eigen::Index>(seg));
+          auto v = buf.segment(static_cast<Eigen::Index>(i * seg), static_cast<Eigen::Index>(seg));
           v = Eigen::Map<const Eigen::VectorXf>(&m.means[std::size_t(k) * d + base], static_cast<Eigen::Index>(seg));
           for (int j = 0; j < m.cluster_components[static_cast<std::size_t>(k)]; ++j)
             v += m.weights[t * m.components + j] *
@@ -218,7 +220,7 @@ void Codec::DecodeViewSlot(int view, float* out) const {
         for (int l = 0; l < L; ++l) {
           float* o = out + (std::size_t(l) * T + t0) * C;
           for (std::size_t i = 0; i < nt; ++i)
-            for (int ch = 0; ch < C; ++ch) o[i * C + ch] = buf[i * seg + std::size_t(l) * C + ch];
+            for (int ch = 0; ch < C; ++ch) o[i * C + ch] = buf[static_cast<Eigen::Index>(i * seg + std::size_t(l) * C + ch)];
         }
       }
     }
