@@ -143,6 +143,51 @@ void BM_PcaView(benchmark::State& st) {
 }
 BENCHMARK(BM_PcaView)->Arg(0)->Arg(1)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 
+// One view slot on one thread: the fused WidePca (Gram, basis, reconstruction handed to a sink
+// that sums squared errors, as the compressor does) against the generic Pca path the compressor
+// used before (centred copy, blocked Gram, basis re-orthonormalised by Householder QR, scores by
+// projection) plus a separate decode for the errors. Arg: 0 WidePca, 1 generic Pca.
+double g_wide_slot_seconds = 0;
+void BM_PcaViewSlotKernel(benchmark::State& st) {
+  const auto& d = Data();
+  const auto slot = d.view_slot(40);
+  const Eigen::Index L = 81, D = static_cast<Eigen::Index>(d.image_size());
+  btf::PcaRequest q;
+  q.max_components = 16;
+  const int before = omp_get_max_threads();
+  omp_set_num_threads(1);
+  double err = 0, secs = 0;
+  int reps = 0;
+  for (auto _ : st) {
+    const auto t0 = std::chrono::steady_clock::now();
+    if (st.range(0) == 0) {
+      btf::WidePca(slot.data(), L, D, q, false, [&](Eigen::Index c0, const Eigen::Ref<const RowMatrixXf>& rec) {
+        const Eigen::Map<const RowMatrixXf, 0, Eigen::OuterStride<>> x(slot.data() + c0, L, rec.cols(),
+                                                                          Eigen::OuterStride<>(D));
+        err += (rec - x).cast<double>().squaredNorm();
+      });
+    } else {
+      const Eigen::Map<const RowMatrixXf> X(slot.data(), L, D);
+      const btf::PcaResult r = btf::Pca(X, q);
+      const RowMatrixXf rec = (r.scores * r.basis).rowwise() + r.mean.transpose();
+      err += (rec - X).cast<double>().squaredNorm();
+    }
+    secs += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    ++reps;
+  }
+  omp_set_num_threads(before);
+  benchmark::DoNotOptimize(err);
+  const double c = 16, flops = double(L) * L * D + 4.0 * L * c * D;
+  st.SetLabel(st.range(0) == 0 ? "WidePca (fused)" : "generic Pca + decode (before issue 15)");
+  st.counters["slot_s"] = secs / reps;
+  st.counters["GFLOPs"] = flops * reps / secs / 1e9;
+  // One thread against the 2-thread GEMM rate: x 2 gives the fraction of one core's rate.
+  if (GemmRate(true) > 0) st.counters["fraction_of_double_gemm_per_core"] = 2 * flops * reps / secs / 1e9 / GemmRate(true);
+  if (st.range(0) == 0) g_wide_slot_seconds = secs / reps;
+  else if (g_wide_slot_seconds > 0) st.counters["generic_s_over_wide_s"] = secs / reps / g_wide_slot_seconds;
+}
+BENCHMARK(BM_PcaViewSlotKernel)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->MinTime(2.0)->UseRealTime();
+
 // Straightforward reference: full SVD (BDCSVD) of every centered slot, first 16 components. Run on
 // the first `slots` view slots only (it is slow); the ratio is per slot.
 void BM_PcaViewFullSvdReference(benchmark::State& st) {
