@@ -204,6 +204,7 @@ void CompressPcaView(const SlotSource& in, const CompressOptions& o, const Trans
 #pragma omp parallel for schedule(static, 1) num_threads(count)
     for (int b = 0; b < count; ++b) {
       const std::size_t i = static_cast<std::size_t>(b);
+      omp_set_num_threads(1);  // Eigen sequential in this slot's task, also when the batch has one slot
       try {
         errs[i] = CompressViewSlot(in, first + b, raw[i], o, tr, slots[static_cast<std::size_t>(first + b)], &drops[i]);
       } catch (...) {
@@ -483,6 +484,7 @@ class LpcaCompressor {
     // which thread took which cluster.
 #pragma omp parallel for schedule(dynamic, 1)
     for (int kk = 0; kk < K_; ++kk) {
+      omp_set_num_threads(1);  // Eigen sequential in this cluster's task
       const int k = order_k[static_cast<std::size_t>(kk)];
       const auto& m = members[static_cast<std::size_t>(k)];
       if (m.empty()) continue;
