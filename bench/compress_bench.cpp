@@ -16,6 +16,8 @@
 #include <memory>
 #include <random>
 
+#include <omp.h>
+
 #include "libbtf/compress/codec.h"
 #include "libbtf/compress/pca.h"
 
@@ -113,28 +115,78 @@ void BM_PcaView(benchmark::State& st) {
   const auto& d = Data();
   btf::CompressOptions o;
   o.components = 16;
+  o.storage = st.range(0) ? btf::CodecStorage::kHalf : btf::CodecStorage::kFloat;
   btf::CompressSummary s;
   const auto source = btf::MemorySource(d);
+  btf::Codec half;  // the decode benchmarks below use the float codec
   for (auto _ : st) {
-    PcaCodec() = std::make_unique<btf::Codec>();
-    s = btf::Compress(o, *source, PcaCodec().get());
+    if (st.range(0) == 0) PcaCodec() = std::make_unique<btf::Codec>();
+    s = btf::Compress(o, *source, st.range(0) == 0 ? PcaCodec().get() : &half);
   }
   SetSizeCounters(st);
+  st.SetLabel(s.storage);
   double decompose = 0;
   for (const auto& [name, sec] : s.times.phases())
     if (name == "decompose") decompose = sec;
-  // Dominant kernels per slot: Gram (double, L^2 D multiply-adds) + basis and scores (float, 2 x 2 L c D).
+  // Kernels per slot (WidePca): Gram, lower triangle (double, L^2 D / 2 multiply-adds), basis
+  // rows (double, L c D), reconstruction for the errors (float, L c D): L^2 D + 4 L c D flops.
   const double L = 81, D = double(d.image_size()), c = 16;
   const double flops = 81 * (2 * L * L * D / 2 + 4 * L * c * D);
   st.counters["decompose_s"] = decompose;
   st.counters["kernel_GFLOPs"] = flops / decompose / 1e9;
   if (GemmRate(true) > 0) st.counters["fraction_of_double_gemm"] = flops / decompose / 1e9 / GemmRate(true);
   st.counters["relative_error"] = s.relative_error;
+  st.counters["codec_MB"] = double(s.codec_bytes) / 1e6;
   st.counters["ratio_vs_float32"] = s.ratio_float32;
-  g_pca_view_seconds_per_slot = s.times.Total() / 81;
-  st.counters["seconds_per_slot"] = g_pca_view_seconds_per_slot;
+  if (st.range(0) == 0) g_pca_view_seconds_per_slot = s.times.Total() / 81;
+  st.counters["seconds_per_slot"] = s.times.Total() / 81;
 }
-BENCHMARK(BM_PcaView)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
+BENCHMARK(BM_PcaView)->Arg(0)->Arg(1)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
+
+// One view slot on one thread: the fused WidePca (Gram, basis, reconstruction handed to a sink
+// that sums squared errors, as the compressor does) against the generic Pca path the compressor
+// used before (centred copy, blocked Gram, basis re-orthonormalised by Householder QR, scores by
+// projection) plus a separate decode for the errors. Arg: 0 WidePca, 1 generic Pca.
+double g_wide_slot_seconds = 0;
+void BM_PcaViewSlotKernel(benchmark::State& st) {
+  const auto& d = Data();
+  const auto slot = d.view_slot(40);
+  const Eigen::Index L = 81, D = static_cast<Eigen::Index>(d.image_size());
+  btf::PcaRequest q;
+  q.max_components = 16;
+  const int before = omp_get_max_threads();
+  omp_set_num_threads(1);
+  double err = 0, secs = 0;
+  int reps = 0;
+  for (auto _ : st) {
+    const auto t0 = std::chrono::steady_clock::now();
+    if (st.range(0) == 0) {
+      btf::WidePca(slot.data(), L, D, q, false, [&](Eigen::Index c0, const Eigen::Ref<const RowMatrixXf>& rec) {
+        const Eigen::Map<const RowMatrixXf, 0, Eigen::OuterStride<>> x(slot.data() + c0, L, rec.cols(),
+                                                                          Eigen::OuterStride<>(D));
+        err += (rec - x).cast<double>().squaredNorm();
+      });
+    } else {
+      const Eigen::Map<const RowMatrixXf> X(slot.data(), L, D);
+      const btf::PcaResult r = btf::Pca(X, q);
+      const RowMatrixXf rec = (r.scores * r.basis).rowwise() + r.mean.transpose();
+      err += (rec - X).cast<double>().squaredNorm();
+    }
+    secs += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    ++reps;
+  }
+  omp_set_num_threads(before);
+  benchmark::DoNotOptimize(err);
+  const double c = 16, flops = double(L) * L * D + 4.0 * L * c * D;
+  st.SetLabel(st.range(0) == 0 ? "WidePca (fused)" : "generic Pca + decode (before issue 15)");
+  st.counters["slot_s"] = secs / reps;
+  st.counters["GFLOPs"] = flops * reps / secs / 1e9;
+  // One thread against the 2-thread GEMM rate: x 2 gives the fraction of one core's rate.
+  if (GemmRate(true) > 0) st.counters["fraction_of_double_gemm_per_core"] = 2 * flops * reps / secs / 1e9 / GemmRate(true);
+  if (st.range(0) == 0) g_wide_slot_seconds = secs / reps;
+  else if (g_wide_slot_seconds > 0) st.counters["generic_s_over_wide_s"] = secs / reps / g_wide_slot_seconds;
+}
+BENCHMARK(BM_PcaViewSlotKernel)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->MinTime(2.0)->UseRealTime();
 
 // Straightforward reference: full SVD (BDCSVD) of every centered slot, first 16 components. Run on
 // the first `slots` view slots only (it is slow); the ratio is per slot.
@@ -185,10 +237,12 @@ void BM_Lpca(benchmark::State& st) {
 }
 BENCHMARK(BM_Lpca)->Arg(20)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 
-// The LPCA reassignment kernel alone (one texel block against all clusters), as a GEMM rate.
+// The LPCA reassignment kernel alone (one texel block against all clusters, on all threads; the
+// compressor runs one block per thread), as a GEMM rate.
 void BM_LpcaReassignKernel(benchmark::State& st) {
   const auto& d = Data();
-  const Eigen::Index n = std::min<Eigen::Index>(4096, static_cast<Eigen::Index>(d.num_texels()));
+  // One static block of the reassignment (256 texels, compress.cpp kRows) against all clusters.
+  const Eigen::Index n = std::min<Eigen::Index>(256, static_cast<Eigen::Index>(d.num_texels()));
   const Eigen::Index dim = static_cast<Eigen::Index>(d.abrdf_size()), cols = 32 * 9;
   RowMatrixXf A = RowMatrixXf::Random(n, dim), B = RowMatrixXf::Random(cols, dim);
   Eigen::MatrixXf P(n, cols);
@@ -268,22 +322,35 @@ void BM_LpcaLloydReference(benchmark::State& st) {
 }
 BENCHMARK(BM_LpcaLloydReference)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 
+// Args: codec (0 pca-view, 1 lpca), threads (0 = all). values_per_s counts L x H x W x C decoded
+// values per second (the issue's "texel-values"); with 1 thread it is the per-core rate.
 void BM_DecodeViewSlot(benchmark::State& st) {
   const btf::Codec& c = st.range(0) == 0 ? *PcaCodec() : *LpcaCodec();
   std::vector<float> out(c.image_size() * c.num_lights());
+  const int before = omp_get_max_threads();
+  if (st.range(1) > 0) omp_set_num_threads(static_cast<int>(st.range(1)));
   int v = 0;
   for (auto _ : st) {
     c.DecodeViewSlot(v, out.data());
     v = (v + 1) % c.num_views();
     benchmark::DoNotOptimize(out.data());
   }
-  st.SetLabel(st.range(0) == 0 ? "pca-view" : "lpca");
+  omp_set_num_threads(before);
+  st.SetLabel(std::string(st.range(0) == 0 ? "pca-view" : "lpca") + (st.range(1) == 1 ? ", 1 thread" : ", all threads"));
   // One slot = L images = L x H x W texel values.
   st.counters["images_per_s"] = benchmark::Counter(double(st.iterations()) * c.num_lights(), benchmark::Counter::kIsRate);
   st.counters["texels_per_s"] = benchmark::Counter(double(st.iterations()) * c.num_lights() * c.height() * c.width(),
                                                    benchmark::Counter::kIsRate);
+  st.counters["values_per_s"] = benchmark::Counter(double(st.iterations()) * double(out.size()), benchmark::Counter::kIsRate);
 }
-BENCHMARK(BM_DecodeViewSlot)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->MinTime(1.0)->UseRealTime();
+BENCHMARK(BM_DecodeViewSlot)
+    ->Args({0, 1})
+    ->Args({1, 1})
+    ->Args({0, 0})
+    ->Args({1, 0})
+    ->Unit(benchmark::kMillisecond)
+    ->MinTime(1.0)
+    ->UseRealTime();
 
 void BM_DecodeValue(benchmark::State& st) {
   const btf::Codec& c = st.range(0) == 0 ? *PcaCodec() : *LpcaCodec();

@@ -31,6 +31,14 @@ CodecMethod ParseMethod(const std::string& name) {
   ThrowUsage("unknown compression method '{}' (use pca-view, lpca, fmf or dfmf)", name);
 }
 
+std::string StorageName(CodecStorage storage) { return storage == CodecStorage::kHalf ? "half" : "float"; }
+
+CodecStorage ParseStorage(const std::string& name) {
+  if (name == "float") return CodecStorage::kFloat;
+  if (name == "half") return CodecStorage::kHalf;
+  ThrowUsage("unknown coefficient storage '{}' (use float or half)", name);
+}
+
 void CompressOptions::Check() const {
   BTF_CHECK_OPTION(components >= 1 && components <= 4096, "components", "must be 1..4096");
   BTF_CHECK_OPTION(clusters >= 1 && clusters <= 65535, "clusters", "must be 1..65535");
@@ -41,6 +49,8 @@ void CompressOptions::Check() const {
   BTF_CHECK_OPTION(max_iterations >= 0 && max_iterations <= 1000, "max_iterations", "must be 0..1000");
   BTF_CHECK_OPTION(min_improvement >= 0 && min_improvement < 1, "min_improvement", "must be in [0, 1)");
   BTF_CHECK_OPTION(gram_limit >= 1, "gram_limit", "must be >= 1");
+  BTF_CHECK_OPTION(storage == CodecStorage::kFloat || !IsFullMatrixFactorisation(method), "storage",
+                   "half storage is for pca-view and lpca codecs (fmf/dfmf factors are stored as float)");
 }
 
 nlohmann::json CompressOptions::ToJson() const {
@@ -49,12 +59,13 @@ nlohmann::json CompressOptions::ToJson() const {
           {"retained_energy", retained_energy}, {"seed", seed},
           {"log_transform", log_transform}, {"log_epsilon", log_epsilon},
           {"max_iterations", max_iterations}, {"min_improvement", min_improvement},
-          {"gram_limit", gram_limit}};
+          {"gram_limit", gram_limit},       {"storage", StorageName(storage)}};
 }
 
 nlohmann::json CompressSummary::ToJson() const {
   nlohmann::json j;
   j["method"] = method;
+  j["storage"] = storage;
   j["input"] = input;
   j["shape"] = {{"views", views}, {"lights", lights}, {"height", height}, {"width", width}, {"channels", channels}};
   j["components"] = components;
@@ -99,7 +110,7 @@ std::string CompressSummary::Report() const {
     r += fmt::format("  components            {} (per matrix: {})\n", components, fmt::join(slot_components, " "));
   else
     r += fmt::format("  components            {} (max per view slot)\n", components);
-  r += fmt::format("  codec size            {} (coefficients)\n", FormatBytes(codec_bytes));
+  r += fmt::format("  codec size            {} (coefficients, {} storage)\n", FormatBytes(codec_bytes), storage);
   r += fmt::format("  ratio                 {:.2f}:1 vs float32 raw ({}), {:.2f}:1 vs half raw ({})\n", ratio_float32,
                    FormatBytes(raw_float32_bytes), ratio_half, FormatBytes(raw_half_bytes));
   r += fmt::format("  RMSE                  {:.6g}\n", rmse);
@@ -133,16 +144,16 @@ Codec CodecBuilder::Make(CodecMethod method, Sampling views, Sampling lights, in
 }
 
 std::uint64_t Codec::StoredBytes() const {
-  std::uint64_t values = 0;
+  std::uint64_t floats = 0, ints = 0;
   if (method_ == CodecMethod::kPcaView) {
-    for (const auto& s : slots_) values += s.mean.size() + s.basis.size() + s.weights.size();
+    for (const auto& s : slots_) floats += s.mean.size() + s.basis.size() + s.weights.size();
   } else if (IsFullMatrixFactorisation(method_)) {
-    values = fmf_.StoredValues();
+    floats = fmf_.StoredValues();
   } else {
-    values = lpca_.means.size() + lpca_.basis.size() + lpca_.weights.size() + lpca_.cluster_of.size() +
-             lpca_.cluster_components.size();
+    floats = lpca_.means.size() + lpca_.basis.size() + lpca_.weights.size();
+    ints = lpca_.cluster_of.size() + lpca_.cluster_components.size();
   }
-  return values * 4;
+  return floats * (storage_ == CodecStorage::kHalf ? 2 : 4) + ints * 4;
 }
 
 std::uint64_t Codec::RawBytes(int bytes_per_value) const {
@@ -201,18 +212,37 @@ void Codec::DecodeViewSlot(int view, float* out) const {
   } else if (IsFullMatrixFactorisation(method_)) {
     fmf_.DecodeViewSlot(view, out);
   } else {
+    // Per block of kTexels texels: their L*C values of this view into a per-thread buffer
+    // (mean + weighted basis rows, contiguous), then written out light by light (contiguous
+    // runs of kTexels*C values). No allocation per texel.
     const LpcaModel& m = lpca_;
     const std::size_t d = abrdf_size(), seg = std::size_t(L) * C, base = std::size_t(view) * seg;
-#pragma omp parallel for schedule(static)
-    for (std::ptrdiff_t ti = 0; ti < static_cast<std::ptrdiff_t>(T); ++ti) {
-      const std::size_t t = static_cast<std::size_t>(ti);
-      const int k = m.cluster_of[t];
-      Eigen::VectorXf v = Eigen::Map<const Eigen::VectorXf>(&m.means[std::size_t(k) * d + base], seg);
-      for (int j = 0; j < m.cluster_components[static_cast<std::size_t>(k)]; ++j)
-        v += m.weights[t * m.components + j] *
-             Eigen::Map<const Eigen::VectorXf>(&m.basis[(std::size_t(k) * m.components + j) * d + base], seg);
-      for (int l = 0; l < L; ++l)
-        for (int ch = 0; ch < C; ++ch) out[(std::size_t(l) * T + t) * C + ch] = v[l * C + ch];
+    constexpr std::size_t kTexels = 64;
+    const std::ptrdiff_t blocks = static_cast<std::ptrdiff_t>((T + kTexels - 1) / kTexels);
+#pragma omp parallel
+    {
+      // Eigen-aligned: Eigen peels to the destination's alignment, so the values do not depend
+      // on where malloc put the buffer.
+      Eigen::VectorXf buf(static_cast<Eigen::Index>(kTexels * seg));
+#pragma omp for schedule(static)
+      for (std::ptrdiff_t b = 0; b < blocks; ++b) {
+        const std::size_t t0 = std::size_t(b) * kTexels, nt = std::min(kTexels, T - t0);
+        for (std::size_t i = 0; i < nt; ++i) {
+          const std::size_t t = t0 + i;
+          const int k = m.cluster_of[t];
+          auto v = buf.segment(static_cast<Eigen::Index>(i * seg), static_cast<Eigen::Index>(seg));
+          v = Eigen::Map<const Eigen::VectorXf>(&m.means[std::size_t(k) * d + base], static_cast<Eigen::Index>(seg));
+          for (int j = 0; j < m.cluster_components[static_cast<std::size_t>(k)]; ++j)
+            v += m.weights[t * m.components + j] *
+                 Eigen::Map<const Eigen::VectorXf>(&m.basis[(std::size_t(k) * m.components + j) * d + base],
+                                                   static_cast<Eigen::Index>(seg));
+        }
+        for (int l = 0; l < L; ++l) {
+          float* o = out + (std::size_t(l) * T + t0) * C;
+          for (std::size_t i = 0; i < nt; ++i)
+            for (int ch = 0; ch < C; ++ch) o[i * C + ch] = buf[static_cast<Eigen::Index>(i * seg + std::size_t(l) * C + ch)];
+        }
+      }
     }
   }
   if (transform_ != ValueTransform::kNone) {
@@ -343,6 +373,7 @@ nlohmann::json Codec::Describe() const {
     j["clusters"] = lpca_.clusters;
     j["components"] = lpca_.components;
   }
+  j["storage"] = StorageName(storage_);
   j["stored_bytes"] = StoredBytes();
   j["raw_float32_bytes"] = RawBytes(4);
   j["raw_half_bytes"] = RawBytes(2);

@@ -27,7 +27,7 @@
 namespace btf {
 
 inline constexpr const char* kCodecFormat = "libbtf-codec";
-inline constexpr const char* kCodecFormatVersion = "1.0.0";
+inline constexpr const char* kCodecFormatVersion = "1.1.0";
 inline constexpr int kCodecFormatMajor = 1;
 
 enum class CodecMethod { kPcaView, kLpca, kFmf, kDfmf };
@@ -41,6 +41,15 @@ inline bool IsFullMatrixFactorisation(CodecMethod m) { return m == CodecMethod::
 // Value transform applied before the decomposition and undone after reconstruction.
 // kLog: y = log(x + epsilon); decoding gives exp(y) - epsilon. Inputs must be > -epsilon.
 enum class ValueTransform { kNone, kLog };
+
+// How the codec's float coefficient arrays (means, bases, weights) are stored: float32, or IEEE
+// half (float16 in the file: half the bytes; values rounded to nearest even before the errors
+// are measured, so the summary's errors are those of the stored codec). Eigenvalues stay float64.
+enum class CodecStorage { kFloat, kHalf };
+// "float" / "half".
+std::string StorageName(CodecStorage storage);
+// Throws btf::Error (usage) for unknown names.
+CodecStorage ParseStorage(const std::string& name);
 
 struct CompressOptions {
   CodecMethod method = CodecMethod::kPcaView;
@@ -67,6 +76,7 @@ struct CompressOptions {
   // Decomposition choice: Gram matrix of the smaller side (double) when min(n, d) <= this,
   // randomized SVD (c + 10 oversampling, 2 power iterations) otherwise.
   int gram_limit = 1024;
+  CodecStorage storage = CodecStorage::kFloat;  // coefficient storage (--storage float|half)
   std::optional<SceneSpec> scene;  // keep only what a scene needs (scene.h)
   void Check() const;
   // The options as stored in a codec's provenance (the scene separately).
@@ -75,6 +85,7 @@ struct CompressOptions {
 
 struct CompressSummary {
   std::string method;
+  std::string storage = "float";  // StorageName of the coefficient arrays
   std::string input;  // dataset path or "in-memory dataset"
   int views = 0, lights = 0, height = 0, width = 0, channels = 0;
   int components = 0;                  // the maximum stored per slot / cluster
@@ -82,7 +93,7 @@ struct CompressSummary {
   int clusters = 0;                    // lpca
   std::vector<double> iteration_errors;  // lpca: relative error after each PCA/reassignment round
   std::vector<int> iteration_changes;    // lpca: texels that changed cluster in each round
-  std::uint64_t codec_bytes = 0;         // Codec::StoredBytes()
+  std::uint64_t codec_bytes = 0;         // Codec::StoredBytes() (float arrays at 2 bytes with half storage)
   std::uint64_t raw_float32_bytes = 0, raw_half_bytes = 0;  // of the encoded (possibly reduced) BTF
   double ratio_float32 = 0, ratio_half = 0;
   // Errors of the decoded codec against its input, in the original (untransformed) domain.
@@ -137,6 +148,7 @@ class Codec {
   int channels() const { return channels_; }
   const DatasetInfo& info() const { return info_; }
   ValueTransform transform() const { return transform_; }
+  CodecStorage storage() const { return storage_; }
   double log_epsilon() const { return log_epsilon_; }
   const std::vector<PcaViewSlot>& pca_view() const { return slots_; }
   const LpcaModel& lpca() const { return lpca_; }
@@ -146,7 +158,7 @@ class Codec {
 
   std::size_t image_size() const { return std::size_t(height_) * width_ * channels_; }
   std::size_t abrdf_size() const { return std::size_t(num_views()) * num_lights() * channels_; }
-  // Bytes of the coefficient arrays (float32 / int32 as stored); sampling tables not counted.
+  // Bytes of the coefficient arrays as stored (float32 or float16, int32); sampling tables not counted.
   std::uint64_t StoredBytes() const;
   // Bytes of the decoded BTF as float32 / float16.
   std::uint64_t RawBytes(int bytes_per_value = 4) const;
@@ -176,6 +188,7 @@ class Codec {
   DatasetInfo info_;
   ValueTransform transform_ = ValueTransform::kNone;
   double log_epsilon_ = 0;
+  CodecStorage storage_ = CodecStorage::kFloat;
   std::vector<PcaViewSlot> slots_;
   LpcaModel lpca_;
   FmfModel fmf_;
@@ -191,6 +204,7 @@ class CodecBuilder {
   static LpcaModel& lpca(Codec& c) { return c.lpca_; }
   static FmfModel& fmf(Codec& c) { return c.fmf_; }
   static nlohmann::json& provenance(Codec& c) { return c.provenance_; }
+  static CodecStorage& storage(Codec& c) { return c.storage_; }
 };
 
 // Compresses `input` (an in-memory dataset through MemorySource, a file through
@@ -200,7 +214,7 @@ class CodecBuilder {
 CompressSummary Compress(const CompressOptions& options, const SlotSource& input, Codec* codec,
                          const Reporter& reporter = {});
 
-// Codec files ("libbtf-codec" 1.0.0, docs/format.md). Written atomically.
+// Codec files ("libbtf-codec" 1.1.0, docs/format.md). Written atomically.
 void WriteCodec(const std::filesystem::path& path, const Codec& codec, const std::string& creator = "libbtf");
 // Writes into `out`'s temporary and commits it (for callers that reserved the output early).
 void WriteCodec(AtomicOutput& out, const Codec& codec, const std::string& creator = "libbtf");

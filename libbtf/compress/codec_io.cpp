@@ -1,4 +1,4 @@
-// Codec file "libbtf-codec" version 1.0.0 (normative description: docs/format.md).
+// Codec file "libbtf-codec" version 1.1.0 (normative description: docs/format.md).
 #include <cmath>
 #include <sstream>
 
@@ -70,6 +70,9 @@ void WriteCodec(AtomicOutput& out, const Codec& c, const std::string& creator) {
     f.SetAttr("/codec", "channels", std::int64_t(c.channels()));
     f.SetAttr("/codec", "transform", std::string(c.transform() == ValueTransform::kLog ? "log" : "none"));
     f.SetAttr("/codec", "log_epsilon", c.log_epsilon());
+    const bool half = c.storage() == CodecStorage::kHalf;
+    const h5::Storage st = half ? h5::Storage::kFloat16 : h5::Storage::kFloat32;
+    f.SetAttr("/codec", "storage", std::string(half ? "float16" : "float32"));
     WriteSamplingTables(f, "/codec/view", c.views());
     WriteSamplingTables(f, "/codec/light", c.lights());
     f.WriteString("/codec/compression", c.provenance().dump());
@@ -81,11 +84,11 @@ void WriteCodec(AtomicOutput& out, const Codec& c, const std::string& creator) {
       f.WriteInts("/codec/pca_view/components", {V}, comps.data());
       for (int v = 0; v < c.num_views(); ++v) {
         const PcaViewSlot& s = c.pca_view()[static_cast<std::size_t>(v)];
-        f.WriteFloats(SlotName("mean", v), {H, W, C}, s.mean.data());
+        f.WriteFloats(SlotName("mean", v), {H, W, C}, s.mean.data(), st);
         if (s.components == 0) continue;
         const hsize_t k = s.components;
-        f.WriteFloats(SlotName("basis", v), {k, H, W, C}, s.basis.data());
-        f.WriteFloats(SlotName("weights", v), {L, k}, s.weights.data());
+        f.WriteFloats(SlotName("basis", v), {k, H, W, C}, s.basis.data(), st);
+        f.WriteFloats(SlotName("weights", v), {L, k}, s.weights.data(), st);
         f.WriteDoubles(SlotName("eigenvalues", v), {k}, s.eigenvalues.data());
       }
     } else if (IsFullMatrixFactorisation(c.method())) {
@@ -96,12 +99,12 @@ void WriteCodec(AtomicOutput& out, const Codec& c, const std::string& creator) {
       f.CreateGroup("/codec/lpca");
       f.SetAttr("/codec/lpca", "clusters", std::int64_t(K));
       f.SetAttr("/codec/lpca", "components", std::int64_t(k));
-      f.WriteFloats("/codec/lpca/means", {K, V, L, C}, m.means.data());
+      f.WriteFloats("/codec/lpca/means", {K, V, L, C}, m.means.data(), st);
       f.WriteInts("/codec/lpca/cluster_components", {K}, m.cluster_components.data());
       f.WriteInts("/codec/lpca/cluster_index", {H, W}, m.cluster_of.data());
       if (k > 0) {
-        f.WriteFloats("/codec/lpca/basis", {K, k, V, L, C}, m.basis.data());
-        f.WriteFloats("/codec/lpca/weights", {H, W, k}, m.weights.data());
+        f.WriteFloats("/codec/lpca/basis", {K, k, V, L, C}, m.basis.data(), st);
+        f.WriteFloats("/codec/lpca/weights", {H, W, k}, m.weights.data(), st);
       }
     }
     f.Close();  // throws if the data did not all reach the file: nothing is committed
@@ -141,12 +144,17 @@ Codec ReadCodec(const std::filesystem::path& path) {
   const std::string tr = f.GetString("/codec", "transform");
   if (tr != "none" && tr != "log") ThrowBadInput("'{}': unknown transform '{}' (none or log)", path.string(), tr);
   const double eps = f.GetDouble("/codec", "log_epsilon");
+  // Optional since 1.1.0; float16 arrays are converted to float on reading.
+  const std::string storage = f.HasAttr("/codec", "storage") ? f.GetString("/codec", "storage") : "float32";
+  if (storage != "float32" && storage != "float16")
+    ThrowBadInput("'{}': unknown '/codec@storage' '{}' (float32 or float16)", path.string(), storage);
   if (tr == "log" && !(eps > 0 && std::isfinite(eps)))
     ThrowBadInput("'{}': log transform with invalid epsilon {}", path.string(), eps);
   Sampling views = ReadSamplingTables(f, "/codec/view"), lights = ReadSamplingTables(f, "/codec/light");
   const hsize_t V = views.size(), L = lights.size(), D = hsize_t(H) * W * C;
   Codec c = CodecBuilder::Make(method, views, lights, H, W, C, info, tr == "log" ? ValueTransform::kLog : ValueTransform::kNone,
                                eps);
+  CodecBuilder::storage(c) = storage == "float16" ? CodecStorage::kHalf : CodecStorage::kFloat;
   if (f.Exists("/codec/compression")) {
     auto j = nlohmann::json::parse(f.ReadString("/codec/compression"), nullptr, false);
     if (!j.is_discarded()) CodecBuilder::provenance(c) = j;

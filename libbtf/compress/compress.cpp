@@ -127,25 +127,38 @@ PcaRequest MakeRequest(const CompressOptions& o, std::uint64_t seed_offset) {
 // Per-view PCA (Sattler et al. 2003, section 4.1): per view slot, the light images are the
 // observations; eigen-normtextures over texels, weights per light.
 
-// Decomposes one view slot into `slot`; returns the errors of its reconstruction.
+// Decomposes one view slot into `slot` (WidePca: two tiled passes over the slot, no copy of it
+// unless the log transform needs one); returns the errors of its reconstruction, measured on the
+// tiles as WidePca reconstructs them.
 ErrorStats CompressViewSlot(const SlotSource& in, int v, const std::vector<float>& raw, const CompressOptions& o,
-                            const Transform& tr, const Codec& codec, PcaViewSlot& slot, int* dropped) {
+                            const Transform& tr, PcaViewSlot& slot, int* dropped) {
   const int L = in.lights().size();
   const std::size_t D = in.image_size(), n = in.slot_size();
-  CheckFiniteSlot(in, v, raw.data());
-  std::vector<float> X(raw);
-  tr.Apply(in, v, X.data(), n);
-  const Eigen::Map<const RowMatrixXf> xm(X.data(), L, static_cast<Eigen::Index>(D));
-  PcaResult r = Pca(xm, MakeRequest(o, std::uint64_t(v)));
-  *dropped = r.dropped_null;
-  slot.components = r.components();
-  slot.mean.assign(r.mean.data(), r.mean.data() + D);
-  slot.basis.assign(r.basis.data(), r.basis.data() + r.basis.size());
-  slot.weights.assign(r.scores.data(), r.scores.data() + r.scores.size());
-  slot.eigenvalues = r.eigenvalues;
-  codec.DecodeViewSlot(v, X.data());  // reconstruction, for the errors
+  std::vector<float> transformed;
+  if (tr.log) {  // the log's domain check would misname a NaN: check finiteness first
+    CheckFiniteSlot(in, v, raw.data());
+    transformed = raw;
+    tr.Apply(in, v, transformed.data(), n);
+  }
   ErrorStats e;
-  e.Add(raw.data(), X.data(), n);
+  std::vector<float> row;
+  auto sink = [&](Eigen::Index c0, const Eigen::Ref<const RowMatrixXf>& rec) {
+    row.resize(static_cast<std::size_t>(rec.cols()));
+    for (Eigen::Index l = 0; l < rec.rows(); ++l) {
+      for (Eigen::Index j = 0; j < rec.cols(); ++j) row[static_cast<std::size_t>(j)] = tr.Invert(rec(l, j));
+      e.Add(raw.data() + std::size_t(l) * D + std::size_t(c0), row.data(), row.size());
+    }
+  };
+  WidePcaResult r = WidePca(tr.log ? transformed.data() : raw.data(), L, static_cast<Eigen::Index>(D),
+                            MakeRequest(o, std::uint64_t(v)), o.storage == CodecStorage::kHalf, sink);
+  if (r.non_finite >= 0) CheckFiniteSlot(in, v, raw.data());  // throws, naming the item
+  BTF_CHECK(r.non_finite < 0);
+  *dropped = r.dropped_null;
+  slot.components = r.components;
+  slot.mean = std::move(r.mean);
+  slot.basis = std::move(r.basis);
+  slot.weights = std::move(r.weights);
+  slot.eigenvalues = std::move(r.eigenvalues);
   return e;
 }
 
@@ -191,9 +204,9 @@ void CompressPcaView(const SlotSource& in, const CompressOptions& o, const Trans
 #pragma omp parallel for schedule(static, 1) num_threads(count)
     for (int b = 0; b < count; ++b) {
       const std::size_t i = static_cast<std::size_t>(b);
+      omp_set_num_threads(1);  // Eigen sequential in this slot's task, also when the batch has one slot
       try {
-        errs[i] = CompressViewSlot(in, first + b, raw[i], o, tr, codec, slots[static_cast<std::size_t>(first + b)],
-                                   &drops[i]);
+        errs[i] = CompressViewSlot(in, first + b, raw[i], o, tr, slots[static_cast<std::size_t>(first + b)], &drops[i]);
       } catch (...) {
         failures[i] = std::current_exception();
       }
@@ -249,7 +262,10 @@ class LpcaCompressor {
   }
 
  private:
-  static constexpr Eigen::Index kBlock = 4096;  // texels per reassignment GEMM
+  static constexpr std::size_t kRows = 256;      // texels per GEMM block (assignment, reassignment)
+  static constexpr std::size_t kSample = 8192;   // texels of the k-means sample
+  static constexpr int kLloydRounds = 100;       // k-means rounds at most
+  static constexpr double kLloydTolerance = 1e-5;  // stop when the objective improves by less (relative)
 
   // Texel-major matrix A (N x d, row = one texel's ABRDF), transformed; texel norms.
   void ReadTexelMajor() {
@@ -274,8 +290,65 @@ class LpcaCompressor {
     residual_.assign(N_, 0.0);
   }
 
-  // k-means++ seeds on a deterministic sample of at most 8192 texels, each texel assigned to the
-  // nearest seed, then the first per-cluster PCA.
+  // Runs f(first, count) over [0, m) in static blocks of kRows (the last one shorter), each
+  // block on one thread with Eigen single-threaded: which thread takes a block changes nothing
+  // in its result, so results do not depend on the thread count.
+  template <typename F>
+  static void ForBlocks(std::size_t m, F&& f) {
+    const std::ptrdiff_t blocks = static_cast<std::ptrdiff_t>((m + kRows - 1) / kRows);
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t b = 0; b < blocks; ++b) {
+      omp_set_num_threads(1);  // this thread's own setting: Eigen stays sequential here
+      const std::size_t first = std::size_t(b) * kRows;
+      f(first, std::min<std::size_t>(kRows, m - first));
+    }
+  }
+
+  // For texels rows[0..m) (all texels in order when rows is null): the nearest center (squared
+  // Euclidean distance, the lower index on ties) and that distance.
+  void NearestCenters(const RowMatrixXf& centers, const std::size_t* rows, std::size_t m, std::int32_t* assign,
+                      double* dist) const {
+    const Eigen::VectorXd cn = centers.cast<double>().rowwise().squaredNorm();
+    ForBlocks(m, [&](std::size_t first, std::size_t count) {
+      const Eigen::Index w = static_cast<Eigen::Index>(count);
+      Eigen::MatrixXf P;
+      if (rows) {
+        RowMatrixXf X(w, A_.cols());
+        for (Eigen::Index i = 0; i < w; ++i) X.row(i) = A_.row(static_cast<Eigen::Index>(rows[first + std::size_t(i)]));
+        P.noalias() = X * centers.transpose();
+      } else {
+        P.noalias() = A_.middleRows(static_cast<Eigen::Index>(first), w) * centers.transpose();
+      }
+      for (Eigen::Index i = 0; i < w; ++i) {
+        const std::size_t t = rows ? rows[first + std::size_t(i)] : first + std::size_t(i);
+        double best = std::numeric_limits<double>::infinity();
+        int arg = 0;
+        for (Eigen::Index k = 0; k < centers.rows(); ++k) {
+          const double e = cn[k] - 2.0 * double(P(i, k));
+          if (e < best) best = e, arg = static_cast<int>(k);
+        }
+        assign[first + std::size_t(i)] = arg;
+        if (dist) dist[first + std::size_t(i)] = std::max(0.0, best + norms_[static_cast<Eigen::Index>(t)]);
+      }
+    });
+  }
+
+  // Deterministic sample of at most kSample texels (sorted), drawn with the seed.
+  std::vector<std::size_t> Sample(std::mt19937_64& rng) const {
+    std::vector<std::size_t> sample(N_);
+    std::iota(sample.begin(), sample.end(), std::size_t(0));
+    if (N_ > kSample) {
+      std::shuffle(sample.begin(), sample.end(), rng);
+      sample.resize(kSample);
+      std::sort(sample.begin(), sample.end());
+    }
+    return sample;
+  }
+
+  // k-means on a sample: k-means++ seeds, then Lloyd rounds (means in double, summed in sample
+  // order) until no sample texel moves, the k-means objective improves by less than
+  // kLloydTolerance (relative) or kLloydRounds; every texel then goes to its nearest center, and
+  // the first per-cluster PCA is fitted.
   ClusterFit InitialClustering() {
     K_ = o_.clusters;
     if (std::size_t(K_) > N_) {
@@ -283,36 +356,75 @@ class LpcaCompressor {
       rep_.Warn("{}", sum_.warnings.back());
       K_ = static_cast<int>(N_);
     }
-    const RowMatrixXf centers = SeedCenters();
+    std::mt19937_64 rng(o_.seed);
+    const std::vector<std::size_t> sample = Sample(rng);
+    RowMatrixXf centers = SeedCenters(sample, rng);
+    const std::size_t S = sample.size();
+    std::vector<std::int32_t> assign(S, -1), next(S);
+    std::vector<double> dist(S);
+    double objective = std::numeric_limits<double>::infinity();
+    int rounds = 0;
+    for (; rounds < kLloydRounds; ++rounds) {
+      NearestCenters(centers, sample.data(), S, next.data(), dist.data());
+      const bool moved = next != assign;
+      assign.swap(next);
+      double obj = 0;
+      for (double e : dist) obj += e;
+      if (!moved || !(objective - obj > kLloydTolerance * obj)) break;
+      objective = obj;
+      UpdateMeans(sample, assign, dist, centers);
+    }
     ClusterFit fit;
     fit.assign.assign(N_, 0);
-    const Eigen::VectorXf cn = centers.rowwise().squaredNorm();
-    for (Eigen::Index b = 0; b < Eigen::Index(N_); b += kBlock) {
-      const Eigen::Index w = std::min<Eigen::Index>(kBlock, Eigen::Index(N_) - b);
-      const Eigen::MatrixXf P = A_.middleRows(b, w) * centers.transpose();
-#pragma omp parallel for schedule(static)
-      for (Eigen::Index i = 0; i < w; ++i) {
-        Eigen::Index best;
-        (cn.transpose() - 2 * P.row(i)).minCoeff(&best);
-        fit.assign[static_cast<std::size_t>(b + i)] = static_cast<std::int32_t>(best);
-      }
-    }
+    NearestCenters(centers, nullptr, N_, fit.assign.data(), nullptr);
     FitClusters(fit, false);
     sum_.iteration_errors.push_back(fit.error);
     sum_.iteration_changes.push_back(0);
-    rep_.Info("lpca: initial clustering, relative error {:.5f}", fit.error);
+    rep_.Info("lpca: k-means on {} texels ({} Lloyd rounds), relative error {:.5f}", S, rounds, fit.error);
     return fit;
   }
 
-  RowMatrixXf SeedCenters() {
-    std::mt19937_64 rng(o_.seed);
-    std::vector<std::size_t> sample(N_);
-    std::iota(sample.begin(), sample.end(), std::size_t(0));
-    if (N_ > 8192) {
-      std::shuffle(sample.begin(), sample.end(), rng);
-      sample.resize(8192);
-      std::sort(sample.begin(), sample.end());
+  // Lloyd's update: each center the mean of its sample texels (double, in sample order, columns
+  // split statically); an empty cluster takes the farthest sample texel of a cluster that can
+  // spare one.
+  void UpdateMeans(const std::vector<std::size_t>& sample, std::vector<std::int32_t>& assign,
+                   const std::vector<double>& dist, RowMatrixXf& centers) const {
+    const std::size_t S = sample.size();
+    std::vector<std::size_t> count(static_cast<std::size_t>(K_), 0);
+    for (std::int32_t k : assign) ++count[static_cast<std::size_t>(k)];
+    std::vector<std::size_t> order;
+    for (int k = 0; k < K_; ++k) {
+      if (count[static_cast<std::size_t>(k)] > 0) continue;
+      if (order.empty()) {
+        order.resize(S);
+        std::iota(order.begin(), order.end(), std::size_t(0));
+        std::stable_sort(order.begin(), order.end(), [&](auto a, auto b) { return dist[a] > dist[b]; });
+      }
+      for (std::size_t i : order)
+        if (count[static_cast<std::size_t>(assign[i])] > 1) {
+          --count[static_cast<std::size_t>(assign[i])];
+          assign[i] = k;
+          count[static_cast<std::size_t>(k)] = 1;
+          break;
+        }
     }
+    const Eigen::Index d = A_.cols();
+    constexpr Eigen::Index kCols = 512;
+    const std::ptrdiff_t chunks = static_cast<std::ptrdiff_t>((d + kCols - 1) / kCols);
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t ch = 0; ch < chunks; ++ch) {
+      const Eigen::Index c0 = ch * kCols, w = std::min(kCols, d - c0);
+      Eigen::MatrixXd sums = Eigen::MatrixXd::Zero(K_, w);
+      for (std::size_t i = 0; i < S; ++i)
+        sums.row(assign[i]) += A_.row(static_cast<Eigen::Index>(sample[i])).segment(c0, w).cast<double>();
+      for (int k = 0; k < K_; ++k)
+        if (count[static_cast<std::size_t>(k)] > 0)
+          centers.row(k).segment(c0, w) = (sums.row(k) / double(count[static_cast<std::size_t>(k)])).cast<float>();
+    }
+  }
+
+  // k-means++ seeds (D^2 sampling) on the sample.
+  RowMatrixXf SeedCenters(const std::vector<std::size_t>& sample, std::mt19937_64& rng) {
     RowMatrixXf centers(K_, static_cast<Eigen::Index>(d_));
     std::vector<double> dist(sample.size(), std::numeric_limits<double>::infinity());
     std::size_t pick = sample[std::uniform_int_distribution<std::size_t>(0, sample.size() - 1)(rng)];
@@ -361,23 +473,27 @@ class LpcaCompressor {
       members[static_cast<std::size_t>(k)].push_back(i);
     }
     f.pca.assign(static_cast<std::size_t>(K_), PcaResult{});
-    double res = 0;
     // One cluster per thread (Eigen runs single-threaded inside a parallel region), largest first.
     std::vector<int> order_k(static_cast<std::size_t>(K_));
     std::iota(order_k.begin(), order_k.end(), 0);
     std::stable_sort(order_k.begin(), order_k.end(), [&](int a, int b) {
       return members[static_cast<std::size_t>(a)].size() > members[static_cast<std::size_t>(b)].size();
     });
-#pragma omp parallel for schedule(dynamic, 1) reduction(+ : res)
+    // Each cluster's PCA is computed by one thread alone (Eigen single-threaded inside the
+    // region) and the residuals are summed in cluster order: the result does not depend on
+    // which thread took which cluster.
+#pragma omp parallel for schedule(dynamic, 1)
     for (int kk = 0; kk < K_; ++kk) {
+      omp_set_num_threads(1);  // Eigen sequential in this cluster's task
       const int k = order_k[static_cast<std::size_t>(kk)];
       const auto& m = members[static_cast<std::size_t>(k)];
       if (m.empty()) continue;
       RowMatrixXf X(static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d_));
       for (std::size_t i = 0; i < m.size(); ++i) X.row(Eigen::Index(i)) = A_.row(static_cast<Eigen::Index>(m[i]));
       f.pca[static_cast<std::size_t>(k)] = Pca(X, MakeRequest(o_, std::uint64_t(k)));
-      res += f.pca[static_cast<std::size_t>(k)].residual_energy;
     }
+    double res = 0;
+    for (const PcaResult& p : f.pca) res += p.residual_energy;
     f.error = total_ > 0 ? std::sqrt(res / total_) : 0;
   }
 
@@ -401,13 +517,12 @@ class LpcaCompressor {
     for (int k = 0; k < K; ++k)
       for (int j = 0; j < std::max(ck[static_cast<std::size_t>(k)], 0); ++j)
         me(k, j) = big.row(k).cast<double>().dot(big.row(K + Eigen::Index(k) * c + j).cast<double>());
-    std::size_t moved = 0;
-    for (Eigen::Index b = 0; b < Eigen::Index(N_); b += kBlock) {
-      const Eigen::Index w = std::min<Eigen::Index>(kBlock, Eigen::Index(N_) - b);
-      const Eigen::MatrixXf P = A_.middleRows(b, w) * big.transpose();
-#pragma omp parallel for schedule(static) reduction(+ : moved)
+    std::vector<std::uint8_t> changed(N_, 0);
+    ForBlocks(N_, [&](std::size_t b, std::size_t count) {
+      const Eigen::Index w = static_cast<Eigen::Index>(count);
+      const Eigen::MatrixXf P = A_.middleRows(static_cast<Eigen::Index>(b), w) * big.transpose();
       for (Eigen::Index i = 0; i < w; ++i) {
-        const std::size_t ti = static_cast<std::size_t>(b + i);
+        const std::size_t ti = b + static_cast<std::size_t>(i);
         double best = std::numeric_limits<double>::infinity();
         int arg = assign[ti];
         for (int k = 0; k < K; ++k) {
@@ -420,10 +535,11 @@ class LpcaCompressor {
           if (r < best) best = r, arg = k;
         }
         residual_[ti] = std::max(best, 0.0);
-        if (arg != assign[ti]) ++moved;
+        changed[ti] = arg != assign[ti];
         assign[ti] = arg;
       }
-    }
+    });
+    const std::size_t moved = std::accumulate(changed.begin(), changed.end(), std::size_t(0));
     return moved;
   }
 
@@ -477,6 +593,9 @@ class LpcaCompressor {
       const std::size_t row = seen[static_cast<std::size_t>(k)]++;
       for (int j = 0; j < p.components(); ++j) m.weights[i * c + j] = p.scores(Eigen::Index(row), j);
     }
+    if (o_.storage == CodecStorage::kHalf)
+      for (auto* a : {&m.means, &m.basis, &m.weights})
+        for (float& x : *a) x = RoundToHalf(x);
     if (small > 0) {
       sum_.warnings.push_back(fmt::format("{} clusters have too few texels for {} components (clamped to members - 1)",
                                           small, o_.components));
@@ -570,7 +689,9 @@ CompressSummary Compress(const CompressOptions& options, const SlotSource& input
   Codec codec = CodecBuilder::Make(o.method, in.views(), in.lights(), in.height(), in.width(), in.channels(), in.info(),
                                    o.log_transform ? ValueTransform::kLog : ValueTransform::kNone,
                                    o.log_transform ? o.log_epsilon : 0.0);
+  CodecBuilder::storage(codec) = o.storage;
   sum.method = MethodName(o.method);
+  sum.storage = StorageName(o.storage);
   sum.views = in.views().size();
   sum.lights = in.lights().size();
   sum.height = in.height();

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <random>
 
+#include "libbtf/io/half.h"
+
 #include <Eigen/Eigenvalues>
 #include <Eigen/QR>
 #include <Eigen/SVD>
@@ -35,29 +37,33 @@ void Center(const Eigen::Ref<const RowMatrixXf>& X, PcaResult& r, RowMatrixXf& X
 }
 
 // Number of components to keep from eigenvalues sorted in decreasing order.
-int ChooseComponents(const std::vector<double>& eig, const PcaRequest& q, PcaResult& r, int limit) {
+int ChooseComponents(const std::vector<double>& eig, const PcaRequest& q, double total_energy, double centered_energy,
+                     int limit, int* dropped_null) {
   int c = std::min<int>(q.max_components, limit);
   c = std::min<int>(c, static_cast<int>(eig.size()));
   // Null components: relative to the largest, and to float rounding of the data (~1e-12 of the energy).
-  const double floor = std::max(kNullEigenvalueFraction * (eig.empty() ? 0.0 : eig[0]), 1e-12 * r.total_energy);
+  const double floor = std::max(kNullEigenvalueFraction * (eig.empty() ? 0.0 : eig[0]), 1e-12 * total_energy);
   int kept = 0;
   while (kept < c && eig[static_cast<std::size_t>(kept)] > floor && eig[static_cast<std::size_t>(kept)] > 0) ++kept;
-  r.dropped_null = c - kept;
+  *dropped_null = c - kept;
   c = kept;
-  if (q.target_error > 0 && r.total_energy > 0) {
-    double residual = r.centered_energy;
+  if (q.target_error > 0 && total_energy > 0) {
+    double residual = centered_energy;
     for (int k = 0; k <= c; ++k) {
-      if (std::sqrt(std::max(residual, 0.0) / r.total_energy) <= q.target_error) return k;
+      if (std::sqrt(std::max(residual, 0.0) / total_energy) <= q.target_error) return k;
       if (k < c) residual -= eig[static_cast<std::size_t>(k)];
     }
-  } else if (q.retained_energy > 0 && r.centered_energy > 0) {
+  } else if (q.retained_energy > 0 && centered_energy > 0) {
     double captured = 0;
     for (int k = 0; k < c; ++k) {
-      if (captured >= q.retained_energy * r.centered_energy) return k;
+      if (captured >= q.retained_energy * centered_energy) return k;
       captured += eig[static_cast<std::size_t>(k)];
     }
   }
   return c;
+}
+int ChooseComponents(const std::vector<double>& eig, const PcaRequest& q, PcaResult& r, int limit) {
+  return ChooseComponents(eig, q, r.total_energy, r.centered_energy, limit, &r.dropped_null);
 }
 
 // Orthonormalizes the rows of `basis` in order (Householder QR keeps the span of every prefix),
@@ -97,6 +103,7 @@ void Finish(const RowMatrixXf& Xc, PcaResult& r) {
     captured += e;
   }
   r.residual_energy = std::max(0.0, r.centered_energy - captured);
+  NormalizeSigns(r.basis.data(), r.basis.rows(), r.basis.cols(), r.scores.data(), r.scores.rows());
 }
 
 }  // namespace
@@ -190,6 +197,124 @@ PcaResult PcaFullSvd(const Eigen::Ref<const RowMatrixXf>& X, int components) {
   r.basis = svd.matrixV().leftCols(c).transpose();
   r.eigenvalues.assign(static_cast<std::size_t>(c), 0.0);
   Finish(Xc, r);
+  return r;
+}
+
+float RoundToHalf(float x) { return HalfToFloat(FloatToHalf(x)); }
+
+void NormalizeSigns(float* basis, Eigen::Index c, Eigen::Index d, float* weights, Eigen::Index n) {
+  for (Eigen::Index k = 0; k < c; ++k) {
+    const float* row = basis + k * d;
+    float best = 0;
+    Eigen::Index arg = 0;
+    for (Eigen::Index i = 0; i < d; ++i)
+      if (std::abs(row[i]) > best) best = std::abs(row[i]), arg = i;
+    if (!(row[arg] < 0)) continue;
+    for (Eigen::Index i = 0; i < d; ++i) basis[k * d + i] = -basis[k * d + i];
+    for (Eigen::Index l = 0; l < n; ++l) weights[l * c + k] = -weights[l * c + k];
+  }
+}
+
+WidePcaResult WidePca(const float* X, Eigen::Index n, Eigen::Index d, const PcaRequest& q, bool half,
+                      const TileSink& sink) {
+  using TileD = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic>;  // n x w, column-major
+  WidePcaResult r;
+  r.mean.resize(static_cast<std::size_t>(d));
+  MatrixXd G = MatrixXd::Zero(n, n);
+  TileD T(n, kWideTile);
+  std::vector<double> colsum(static_cast<std::size_t>(kWideTile));
+  // Loads columns [c0, c0 + w) centred by the stored (float) mean into T.
+  auto load_centred = [&](Eigen::Index c0, Eigen::Index w) {
+    for (Eigen::Index j = 0; j < w; ++j) {
+      const double m = r.mean[static_cast<std::size_t>(c0 + j)];
+      for (Eigen::Index i = 0; i < n; ++i) T(i, j) = double(X[i * d + c0 + j]) - m;
+    }
+  };
+  // Pass 1: check, mean, centre, Gram; energies in double.
+  double total = 0, centred = 0;
+  for (Eigen::Index c0 = 0; c0 < d; c0 += kWideTile) {
+    const Eigen::Index w = std::min(kWideTile, d - c0);
+    std::fill(colsum.begin(), colsum.end(), 0.0);
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const float* row = X + i * d + c0;
+      bool finite = true;
+      for (Eigen::Index j = 0; j < w; ++j) {
+        const double x = row[j];
+        finite &= std::isfinite(row[j]);
+        colsum[static_cast<std::size_t>(j)] += x;
+        total += x * x;
+      }
+      if (!finite) {
+        for (Eigen::Index j = 0; j < w; ++j)
+          if (!std::isfinite(row[j])) {
+            r.non_finite = std::int64_t(i * d + c0 + j);
+            return r;
+          }
+      }
+    }
+    for (Eigen::Index j = 0; j < w; ++j) {
+      float m = static_cast<float>(colsum[static_cast<std::size_t>(j)] / double(n));
+      r.mean[static_cast<std::size_t>(c0 + j)] = half ? RoundToHalf(m) : m;
+    }
+    load_centred(c0, w);
+    const auto Tw = T.leftCols(w);
+    centred += Tw.squaredNorm();
+    G.selfadjointView<Eigen::Lower>().rankUpdate(Tw);
+  }
+  r.total_energy = total;
+  r.centered_energy = centred;
+  // n observations span at most n - 1 centred directions.
+  const int limit = static_cast<int>(std::min<Eigen::Index>(n - 1, d));
+  r.clamped_to = limit;
+  int c = 0;
+  MatrixXd U;
+  if (std::min(q.max_components, limit) > 0 && centred > 0) {
+    Eigen::SelfAdjointEigenSolver<MatrixXd> es(G.selfadjointView<Eigen::Lower>());
+    U = es.eigenvectors().rowwise().reverse();
+    for (Eigen::Index k = n - 1; k >= 0; --k) r.eigenvalues.push_back(std::max(0.0, es.eigenvalues()[k]));
+    c = ChooseComponents(r.eigenvalues, q, total, centred, limit, &r.dropped_null);
+  }
+  r.eigenvalues.resize(static_cast<std::size_t>(c));
+  r.components = c;
+  double captured = 0;
+  for (double e : r.eigenvalues) captured += e;
+  r.residual_energy = std::max(0.0, centred - captured);
+  // Weights U Lambda^(1/2); S = Lambda^(-1/2) U^T maps a centred tile to basis rows.
+  MatrixXd S(c, n);
+  RowMatrixXf W(n, c);
+  for (int k = 0; k < c; ++k) {
+    const double s = std::sqrt(r.eigenvalues[static_cast<std::size_t>(k)]);
+    S.row(k) = U.col(k).transpose() / s;
+    for (Eigen::Index l = 0; l < n; ++l) {
+      const float x = static_cast<float>(U(l, k) * s);
+      W(l, k) = half ? RoundToHalf(x) : x;
+    }
+  }
+  r.basis.resize(static_cast<std::size_t>(c) * static_cast<std::size_t>(d));
+  // Pass 2: basis rows and (for the sink) the reconstruction, tile by tile.
+  const Eigen::Map<const Eigen::RowVectorXf> mean(r.mean.data(), d);
+  MatrixXd Bd(c, kWideTile);
+  RowMatrixXf Bf(c, kWideTile), R(n, kWideTile);
+  Eigen::Map<RowMatrixXf> basis(r.basis.data(), c, d);
+  for (Eigen::Index c0 = 0; c0 < d && (c > 0 || sink); c0 += kWideTile) {
+    const Eigen::Index w = std::min(kWideTile, d - c0);
+    if (c > 0) {
+      load_centred(c0, w);
+      Bd.leftCols(w).noalias() = S * T.leftCols(w);
+      Bf.leftCols(w) = Bd.leftCols(w).cast<float>();
+      if (half) Bf.leftCols(w) = Bf.leftCols(w).unaryExpr([](float x) { return RoundToHalf(x); });
+      basis.middleCols(c0, w) = Bf.leftCols(w);
+    }
+    if (!sink) continue;
+    if (c > 0)
+      R.leftCols(w).noalias() = W * Bf.leftCols(w);
+    else
+      R.leftCols(w).setZero();
+    R.leftCols(w).rowwise() += mean.segment(c0, w);
+    sink(c0, R.leftCols(w));
+  }
+  r.weights.assign(W.data(), W.data() + W.size());
+  NormalizeSigns(r.basis.data(), c, d, r.weights.data(), n);
   return r;
 }
 

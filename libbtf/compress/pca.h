@@ -3,6 +3,7 @@
 // by shape: the Gram (n x n) or covariance (d x d) matrix of the smaller side in double, or a
 // randomized range finder (Halko, Martinsson & Tropp 2011) when both sides are large.
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include <Eigen/Core>
@@ -45,5 +46,45 @@ PcaResult Pca(const Eigen::Ref<const RowMatrixXf>& X, const PcaRequest& request)
 // The straightforward reference: full SVD (Eigen::BDCSVD) of the centered matrix, first c
 // components, no shape-dependent choice (benchmarks and tests compare against it).
 PcaResult PcaFullSvd(const Eigen::Ref<const RowMatrixXf>& X, int components);
+
+// Per-view PCA's shape: few observations (n, the lights) of many variables (d, the texel values),
+// X row-major n x d with row stride d, decomposed in column tiles of kWideTile without a copy:
+//   pass 1, per tile: finiteness check, column means (double; the float-rounded mean is the one
+//     stored and used to centre), centring in double, Gram G += Tc Tc^T (double);
+//   eigenpairs (lambda_k, u_k) of G, components chosen as in Pca;
+//   pass 2, per tile: basis rows b_k = u_k^T Tc / sqrt(lambda_k) in double, rounded to float (or
+//     half-representable floats), weights U Lambda^(1/2) (= the projections Xc b_k^T in exact
+//     arithmetic), and, if `sink` is set, the tile's reconstruction handed to it (for errors).
+// Signs: each basis row's largest-magnitude entry (first in index order on ties) is positive,
+// its weight column flipped with it. The tiles' order is fixed, so results do not depend on
+// threads. request.gram_limit, oversampling and power_iterations are not used (always the Gram).
+inline constexpr Eigen::Index kWideTile = 256;
+
+struct WidePcaResult {
+  int components = 0;
+  std::vector<float> mean;          // d
+  std::vector<float> basis;         // c x d, orthonormal rows, by decreasing eigenvalue
+  std::vector<float> weights;       // n x c
+  std::vector<double> eigenvalues;  // c: squared norm captured per component (lambda_k)
+  double total_energy = 0, centered_energy = 0, residual_energy = 0;
+  int clamped_to = 0, dropped_null = 0;
+  // Index (row * d + column) of a NaN/Inf (the first found, tile by tile); then nothing else is set.
+  std::int64_t non_finite = -1;
+};
+
+// Receives the reconstruction mean + weights * basis of columns [col0, col0 + tile.cols()).
+using TileSink = std::function<void(Eigen::Index col0, const Eigen::Ref<const RowMatrixXf>& tile)>;
+
+// half: mean, basis and weights rounded to IEEE half (stored as floats), before the
+// reconstruction the sink sees.
+WidePcaResult WidePca(const float* X, Eigen::Index n, Eigen::Index d, const PcaRequest& request, bool half = false,
+                      const TileSink& sink = {});
+
+// Flips the sign of basis row k (and of its scores/weights column k) so that the row's
+// largest-magnitude entry, the first one on ties, is positive.
+void NormalizeSigns(float* basis, Eigen::Index c, Eigen::Index d, float* weights, Eigen::Index n);
+
+// Rounds to the nearest IEEE half value (ties to even), kept as a float.
+float RoundToHalf(float x);
 
 }  // namespace btf

@@ -12,6 +12,7 @@ namespace {
 
 struct CompressFlags {
   std::string dataset, output, method = btf::MethodName(btf::CompressOptions().method), scene;
+  std::string storage = btf::StorageName(btf::CompressOptions().storage);
   btf::CompressOptions options;
 };
 
@@ -28,6 +29,7 @@ int RunCompress(const CLI::App& app, const btf::cli::CommonFlags& common, Compre
   if (f.dataset.empty()) btf::ThrowUsage("give a DATASET to compress, or a subcommand (decode, export); see --help");
   if (f.output.empty()) btf::ThrowUsage("-o/--output is required when compressing");
   f.options.method = btf::ParseMethod(f.method);
+  f.options.storage = btf::ParseStorage(f.storage);
   if (!f.scene.empty()) f.options.scene = btf::SceneSpec::Load(f.scene);
   // Claim the output before the work: an unwritable folder fails now, not after the compression.
   btf::AtomicOutput target(f.output);
@@ -85,6 +87,7 @@ int main(int argc, char** argv) {
   app.add_option("--log-epsilon", co.log_epsilon, "Epsilon of --log, in data units");
   app.add_option("--max-iterations", co.max_iterations, "LPCA: PCA/reassignment rounds at most");
   app.add_option("--min-improvement", co.min_improvement, "LPCA: stop when a round improves the error by less");
+  app.add_option("--storage", cf.storage, "Coefficient storage: float (float32) or half (float16, half the size)");
   app.add_option("--scene", cf.scene, "scene.json: keep only the directions, mip level and channels a scene uses");
   app.add_option("-o,--output", cf.output, "Output codec file (.h5)");
 
