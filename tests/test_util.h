@@ -1,9 +1,11 @@
 #pragma once
 // Helpers shared by the test suites.
 #include <filesystem>
+#include <functional>
 #include <string>
 
 #include "libbtf/core/dataset.h"
+#include "libbtf/core/error.h"
 
 namespace btf::test {
 
@@ -18,6 +20,17 @@ std::string Slurp(const std::filesystem::path& path);
 
 // Path of a built tool, e.g. Tool("btf-info").
 std::string Tool(const std::string& name);
+
+// The message of the btf::Error that f throws ("" if it throws none); its exit code in *code.
+inline std::string ErrorOf(const std::function<void()>& f, ExitCode* code = nullptr) {
+  try {
+    f();
+  } catch (const Error& e) {
+    if (code) *code = e.code();
+    return e.what();
+  }
+  return "";
+}
 
 // A small deterministic dataset with distinct values per (v, l, y, x, c).
 Dataset MakeTestDataset(int views, int lights, int height, int width, int channels = 3);

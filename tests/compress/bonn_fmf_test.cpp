@@ -8,25 +8,12 @@
 
 #include "libbtf/core/error.h"
 #include "libbtf/io/bonn.h"
+#include "tests/codec_util.h"
 #include "tests/test_util.h"
 
 namespace btf {
 namespace {
 
-// max |a - b| / max |a| over every value.
-double MaxRelativeError(const SlotSource& a, const SlotSource& b) {
-  std::vector<float> x(a.slot_size()), y(b.slot_size());
-  double err = 0, peak = 0;
-  for (int v = 0; v < a.views().size(); ++v) {
-    a.ReadViewSlot(v, x.data());
-    b.ReadViewSlot(v, y.data());
-    for (std::size_t i = 0; i < x.size(); ++i) {
-      err = std::max(err, double(std::abs(x[i] - y[i])));
-      peak = std::max(peak, double(std::abs(x[i])));
-    }
-  }
-  return err / peak;
-}
 
 Dataset RandomDataset(int views, int lights, int h, int w, int channels) {
   Dataset d = test::MakeTestDataset(views, lights, h, w, channels);
@@ -47,7 +34,7 @@ TEST(BonnFmfWriter, AllComponentsRoundTrip) {
   EXPECT_EQ(fmf->kind(), "bonn-fmf");
   CheckCompatible(*MemorySource(d), *fmf);
   // float32 factors of a double SVD: a few float ulps of the largest value.
-  EXPECT_LT(MaxRelativeError(*MemorySource(d), *fmf), 1e-5);
+  EXPECT_LT(test::MaxRelativeError(*MemorySource(d), *fmf), 1e-5);
   o.decorrelate = true;
   WriteFmf(o, *MemorySource(d), dir / "d.btf");
   const BonnReader r(dir / "d.btf");
@@ -55,7 +42,7 @@ TEST(BonnFmfWriter, AllComponentsRoundTrip) {
   EXPECT_EQ(r.header().components, (std::vector<int>{12, 12, 12}));
   // The YUV inverse the reader applies has 5-6 significant digits (docs/format.md): its product
   // with the forward matrix differs from the identity by up to about 2e-5.
-  EXPECT_LT(MaxRelativeError(*MemorySource(d), *OpenBonnSource(dir / "d.btf")), 1e-4);
+  EXPECT_LT(test::MaxRelativeError(*MemorySource(d), *OpenBonnSource(dir / "d.btf")), 1e-4);
 }
 
 TEST(BonnFmfWriter, FewerComponentsGiveLargerErrorsAndLowRankDataIsExact) {
@@ -66,7 +53,7 @@ TEST(BonnFmfWriter, FewerComponentsGiveLargerErrorsAndLowRankDataIsExact) {
     FmfWriteOptions o;
     o.components = k;
     WriteFmf(o, *MemorySource(d), dir / "f.btf");
-    const double e = MaxRelativeError(*MemorySource(d), *OpenBonnSource(dir / "f.btf"));
+    const double e = test::MaxRelativeError(*MemorySource(d), *OpenBonnSource(dir / "f.btf"));
     EXPECT_LT(e, previous) << k;
     previous = e;
   }
@@ -75,7 +62,7 @@ TEST(BonnFmfWriter, FewerComponentsGiveLargerErrorsAndLowRankDataIsExact) {
   FmfWriteOptions o;
   o.components = 3;
   WriteFmf(o, *MemorySource(low), dir / "low.btf");
-  EXPECT_LT(MaxRelativeError(*MemorySource(low), *OpenBonnSource(dir / "low.btf")), 1e-5);
+  EXPECT_LT(test::MaxRelativeError(*MemorySource(low), *OpenBonnSource(dir / "low.btf")), 1e-5);
 }
 
 TEST(BonnFmfWriter, DfmfNeedsThreeChannelsAndNothingIsWritten) {

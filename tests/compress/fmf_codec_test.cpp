@@ -66,22 +66,8 @@ Dataset SeparableDataset(int rank) {
   return d;
 }
 
-// max |a - b| / max |a| over every value of two view-slot sources.
-double MaxRelative(const SlotSource& a, const SlotSource& b) {
-  std::vector<float> x(a.slot_size()), y(b.slot_size());
-  double err = 0, peak = 0;
-  for (int v = 0; v < a.views().size(); ++v) {
-    a.ReadViewSlot(v, x.data());
-    b.ReadViewSlot(v, y.data());
-    for (std::size_t i = 0; i < x.size(); ++i) {
-      err = std::max(err, double(std::abs(x[i] - y[i])));
-      peak = std::max(peak, double(std::abs(x[i])));
-    }
-  }
-  return err / peak;
-}
 
-double MaxRelative(const Dataset& a, const Codec& c) { return MaxRelative(*MemorySource(a), *MemorySource(c.DecodeAll())); }
+double MaxRelative(const Dataset& a, const Codec& c) { return test::MaxRelativeError(*MemorySource(a), *MemorySource(c.DecodeAll())); }
 
 void Delete(const h5::File& f, const char* name) { ASSERT_GE(H5Ldelete(f.id(), name, H5P_DEFAULT), 0) << name; }
 
@@ -177,7 +163,7 @@ TEST_P(FmfMethods, WrittenAsABonnFileDecodesLikeTheCodec) {
   EXPECT_EQ(r.header().color_model, dfmf ? 1 : 0);
   // FMF: the same float factors, summed in another order (2e-6). DFMF: the reader's YUV inverse
   // has 5-6 significant digits (docs/format.md), the codec's is exact: up to about 2e-5.
-  EXPECT_LT(MaxRelative(*MemorySource(c.DecodeAll()), *OpenBonnSource(path)), dfmf ? 1e-4 : 2e-6);
+  EXPECT_LT(test::MaxRelativeError(*MemorySource(c.DecodeAll()), *OpenBonnSource(path)), dfmf ? 1e-4 : 2e-6);
 }
 
 INSTANTIATE_TEST_SUITE_P(Methods, FmfMethods, ::testing::Values(CodecMethod::kFmf, CodecMethod::kDfmf),
@@ -227,7 +213,7 @@ TEST(FmfCodec, LogCodecsAndTheirBonnFiles) {
   WriteFmf(c, "codec", dir / "log.btf");
   const BonnReader r(dir / "log.btf");
   EXPECT_EQ(r.header().dynamic_range_reduction, 1u);
-  EXPECT_LT(MaxRelative(*MemorySource(c.DecodeAll()), *OpenBonnSource(dir / "log.btf")), 1e-5);
+  EXPECT_LT(test::MaxRelativeError(*MemorySource(c.DecodeAll()), *OpenBonnSource(dir / "log.btf")), 1e-5);
   // Another epsilon, or DFMF with a log, has no Bonn equivalent: usage error, nothing written.
   o.log_epsilon = 1e-3;
   const Codec other = test::CompressDataset(d, o);

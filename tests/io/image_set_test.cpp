@@ -29,15 +29,6 @@ Image KnownImage(int v, int l, int w = 4, int h = 3) {
   return img;
 }
 
-std::string ErrorOf(const std::function<void()>& f, ExitCode* code = nullptr) {
-  try {
-    f();
-  } catch (const Error& e) {
-    if (code) *code = e.code();
-    return e.what();
-  }
-  return "";
-}
 
 ConvertOptions Pattern(const std::string& p) {
   ConvertOptions o;
@@ -101,7 +92,7 @@ TEST(ImageSet, Ubo2003JpegIsDecodedFromSrgbAndMissingImagesAreNamed) {
   ConvertOptions o;
   o.layout = "ubo2003";
   ExitCode code{};
-  const std::string e = ErrorOf([&] { ImportImageSet(o, dir / "ubo", dir / "out.h5"); }, &code);
+  const std::string e = test::ErrorOf([&] { ImportImageSet(o, dir / "ubo", dir / "out.h5"); }, &code);
   EXPECT_EQ(code, ExitCode::kBadInput);
   EXPECT_NE(e.find("6559 of 6561 images are missing"), std::string::npos) << e;
   EXPECT_NE(e.find("'00000 tl000 pl000 tv000 pv000.jpg'"), std::string::npos) << e;
@@ -170,7 +161,7 @@ TEST(ImageSet, BadSetsAreRefusedNamingTheFiles) {
   ImportImageSet(p, set, dir / "ok.h5");  // the complete set imports
   auto refused = [&](const ConvertOptions& o, const std::string& words, ExitCode want = ExitCode::kBadInput) {
     ExitCode code{};
-    const std::string e = ErrorOf([&] { ImportImageSet(o, set, dir / "out.h5"); }, &code);
+    const std::string e = test::ErrorOf([&] { ImportImageSet(o, set, dir / "out.h5"); }, &code);
     EXPECT_EQ(code, want) << e;
     EXPECT_NE(e.find(words), std::string::npos) << e;
     EXPECT_FALSE(std::filesystem::exists(dir / "out.h5"));
@@ -188,7 +179,7 @@ TEST(ImageSet, BadSetsAreRefusedNamingTheFiles) {
   // Nothing matches; a folder that is a file; theta beyond the horizon; a pattern without a field.
   refused(Pattern("{tv}_{pv}_{tl}_{pl}.png"), "no file in");
   ExitCode code{};
-  EXPECT_NE(ErrorOf([&] { ImportImageSet(p, set / "tl0_pl0_tv0_pv0.exr", dir / "out.h5"); }, &code).find("is not a folder"),
+  EXPECT_NE(test::ErrorOf([&] { ImportImageSet(p, set / "tl0_pl0_tv0_pv0.exr", dir / "out.h5"); }, &code).find("is not a folder"),
             std::string::npos);
   EXPECT_EQ(code, ExitCode::kBadInput);
   WriteImage(set / "tl95_pl0_tv0_pv0.exr", KnownImage(0, 0));
@@ -206,10 +197,10 @@ TEST(ImageSet, BadSetsAreRefusedNamingTheFiles) {
   u.allow_missing = true;
   Image grey(8, 8, 3);
   WriteImage(ubo / "00005 tl000 pl000 tv015 pv060.jpg", grey);  // view 2: should be 00002
-  EXPECT_NE(ErrorOf([&] { ImportImageSet(u, ubo, dir / "out.h5"); }).find("image number 5 disagrees"), std::string::npos);
+  EXPECT_NE(test::ErrorOf([&] { ImportImageSet(u, ubo, dir / "out.h5"); }).find("image number 5 disagrees"), std::string::npos);
   std::filesystem::remove(ubo / "00005 tl000 pl000 tv015 pv060.jpg");
   WriteImage(ubo / "00002 tl000 pl000 tv016 pv060.jpg", grey);
-  EXPECT_NE(ErrorOf([&] { ImportImageSet(u, ubo, dir / "out.h5"); }).find("view direction (theta 16, phi 60) is not one"),
+  EXPECT_NE(test::ErrorOf([&] { ImportImageSet(u, ubo, dir / "out.h5"); }).find("view direction (theta 16, phi 60) is not one"),
             std::string::npos);
   EXPECT_FALSE(std::filesystem::exists(dir / "out.h5"));
 }

@@ -30,15 +30,6 @@ Board TwoMarkerBoard() {
 
 void WriteText(const std::filesystem::path& p, const std::string& s) { std::ofstream(p) << s; }
 
-std::string ErrorOf(const std::function<void()>& f, ExitCode* code = nullptr) {
-  try {
-    f();
-  } catch (const Error& e) {
-    if (code) *code = e.code();
-    return e.what();
-  }
-  return "";
-}
 
 TEST(RigIo, BoardRoundTrip) {
   const auto dir = test::TempDir();
@@ -114,17 +105,17 @@ TEST(RigIo, BadFilesNameFileAndField) {
   const auto dir = test::TempDir();
   ExitCode code{};
   // Missing file: I/O error.
-  std::string msg = ErrorOf([&] { ReadBoard(dir / "nope.json"); }, &code);
+  std::string msg = test::ErrorOf([&] { ReadBoard(dir / "nope.json"); }, &code);
   EXPECT_EQ(code, ExitCode::kIo);
   EXPECT_NE(msg.find("nope.json"), std::string::npos);
   // Not JSON.
   WriteText(dir / "b.json", "{ not json");
-  msg = ErrorOf([&] { ReadBoard(dir / "b.json"); }, &code);
+  msg = test::ErrorOf([&] { ReadBoard(dir / "b.json"); }, &code);
   EXPECT_EQ(code, ExitCode::kBadInput);
   // Duplicate ids.
   Board b = TwoMarkerBoard();
   b.markers[1].id = 3;
-  msg = ErrorOf([&] { WriteBoard(dir / "dup.json", b); }, &code);
+  msg = test::ErrorOf([&] { WriteBoard(dir / "dup.json", b); }, &code);
   EXPECT_EQ(code, ExitCode::kBadInput);
   EXPECT_NE(msg.find("duplicate marker id 3"), std::string::npos) << msg;
   EXPECT_FALSE(std::filesystem::exists(dir / "dup.json"));
@@ -132,13 +123,13 @@ TEST(RigIo, BadFilesNameFileAndField) {
   WriteText(dir / "m.json",
             R"({"format":"libbtf-board","format_version":"1.0.0","family":"tag36h11","sample_size_mm":40,
                 "markers":[{"id":1,"corners_mm":[[0,0],[1,0],[1,1]]}]})");
-  msg = ErrorOf([&] { ReadBoard(dir / "m.json"); }, &code);
+  msg = test::ErrorOf([&] { ReadBoard(dir / "m.json"); }, &code);
   EXPECT_EQ(code, ExitCode::kBadInput);
   EXPECT_NE(msg.find("markers[0].corners_mm"), std::string::npos) << msg;
   EXPECT_NE(msg.find("m.json"), std::string::npos) << msg;
   // Newer major version.
   WriteText(dir / "v.json", R"({"format":"libbtf-board","format_version":"2.0.0"})");
-  msg = ErrorOf([&] { ReadBoard(dir / "v.json"); }, &code);
+  msg = test::ErrorOf([&] { ReadBoard(dir / "v.json"); }, &code);
   EXPECT_NE(msg.find("newer"), std::string::npos) << msg;
   // Manifest: index outside the sampling.
   Manifest m;
@@ -155,7 +146,7 @@ TEST(RigIo, BadFilesNameFileAndField) {
   EXPECT_NO_THROW(ReadManifest(dir / "man.json"));
   m.photos[0].light_index = 4;
   WriteManifest(dir / "man.json", m);
-  msg = ErrorOf([&] { ReadManifest(dir / "man.json"); }, &code);
+  msg = test::ErrorOf([&] { ReadManifest(dir / "man.json"); }, &code);
   EXPECT_EQ(code, ExitCode::kBadInput);
   EXPECT_NE(msg.find("photos[0].light_index"), std::string::npos) << msg;
 }
