@@ -471,6 +471,11 @@ Manifest ReadManifest(const std::filesystem::path& path) {
     m.transfer = root["transfer"].String();
     if (m.transfer != "linear" && m.transfer != "srgb") root["transfer"].Fail("must be 'linear' or 'srgb'");
   }
+  for (const auto& [key, field] : {std::pair{"dark_frame", &m.dark_frame}, std::pair{"flat_field", &m.flat_field}})
+    if (root.Has(key)) {
+      *field = root[key].String();
+      if (field->empty()) root[key].Fail("must name a photo file (or be left out)");
+    }
   if (root.Has("extra")) m.extra = root["extra"].raw();
   const Node ps = root["photos"];
   const std::size_t n = ps.ArraySize();
@@ -525,6 +530,8 @@ void WriteManifest(const std::filesystem::path& path, const Manifest& m) {
   j["lights"] = SamplingToJson(m.lights);
   j["bit_depth"] = m.bit_depth;
   if (!m.transfer.empty()) j["transfer"] = m.transfer;
+  if (!m.dark_frame.empty()) j["dark_frame"] = m.dark_frame;
+  if (!m.flat_field.empty()) j["flat_field"] = m.flat_field;
   j["pixel_value"] = "exposure * radiance; radiance = BTF(1/sr) * irradiance";
   json ps = json::array();
   for (const auto& e : m.photos) {

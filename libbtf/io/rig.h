@@ -118,6 +118,10 @@ struct Manifest {
   Sampling views, lights;  // the full samplings the indices refer to
   int bit_depth = 0;       // 0 = float EXR, 8 or 16 = integer PNG/JPEG
   std::string transfer;    // integer encoding: "" = not stated (linear PNG, or the file's tag), "linear", "srgb"
+  // Reference photos of the same camera, relative to the manifest's folder ("" = none): a dark
+  // frame (lens capped: the sensor's black level, subtracted from every photo) and a flat field
+  // (a uniformly lit white target: the lens's relative illumination, divided out).
+  std::string dark_frame, flat_field;
   std::vector<PhotoEntry> photos;
   nlohmann::json extra = nlohmann::json::object();  // model, preset, resolution hints
 };

@@ -147,7 +147,8 @@ void ApplyResponse(Image& codes, const ResponseCurve& curve, const std::string& 
 }
 
 HdrMerge MergeBracket(const std::vector<Image>& stored, const std::vector<double>& exposures,
-                      const std::vector<std::string>& files, const ResponseCurve& curve, const HdrOptions& o) {
+                      const std::vector<std::string>& files, const ResponseCurve& curve, const HdrOptions& o,
+                      const Image* dark) {
   CheckSameShape(stored, exposures, files, files.empty() ? std::string("bracket") : files[0]);
   const Image& first = stored[0];
   const int C = first.channels;
@@ -171,6 +172,7 @@ HdrMerge MergeBracket(const std::vector<Image>& stored, const std::vector<double
         const float s = stored[k].pixels[i];
         double v = s;
         if (!curve.empty()) v = CodeToLinear(curve, c, s);
+        if (dark) v -= dark->pixels[i];
         if (!(s < o.saturation)) continue;  // clipped (NaN too)
         if (!curve.empty() && 255.0 * s > curve.max_code + 0.5) continue;  // beyond the curve's data: as clipped
         const double e = exposures[k];
@@ -189,7 +191,7 @@ HdrMerge MergeBracket(const std::vector<Image>& stored, const std::vector<double
       } else {  // clipped in every exposure: a lower bound
         pixel_clipped = true;
         const float s = stored[k_short].pixels[i];
-        out = (curve.empty() ? s : CodeToLinear(curve, c, s)) / exposures[k_short];
+        out = ((curve.empty() ? s : CodeToLinear(curve, c, s)) - (dark ? dark->pixels[i] : 0.0)) / exposures[k_short];
       }
       m.radiance.pixels[i] = static_cast<float>(std::isfinite(out) ? std::max(0.0, out) : 0.0);
     }

@@ -59,9 +59,12 @@ struct HdrMerge {
 };
 
 // Merges one bracket: `stored` are the photos' values as read (decoded linear when `curve` is
-// empty; raw codes / 255 with a curve), `files` name them in errors. Throws btf::Error (bad
-// input) if the sizes or channel counts differ, or exposures are not > 0.
+// empty; raw codes / 255 with a curve), `files` name them in errors. With a `dark` frame (linear,
+// the photos' shape) each exposure's estimate is (v_k - dark) / e_k; the thresholds still apply
+// to the stored values. Throws btf::Error (bad input) if the sizes or channel counts differ, or
+// exposures are not > 0.
 HdrMerge MergeBracket(const std::vector<Image>& stored, const std::vector<double>& exposures,
-                      const std::vector<std::string>& files, const ResponseCurve& curve, const HdrOptions& options);
+                      const std::vector<std::string>& files, const ResponseCurve& curve, const HdrOptions& options,
+                      const Image* dark = nullptr);
 
 }  // namespace btf

@@ -282,6 +282,7 @@ class Registration {
     input_ = o_.input;
     if (input_.colorspace == "auto" && !manifest_.transfer.empty()) input_.colorspace = manifest_.transfer;
     if (o_.hdr.response != "linear") RecoverResponseCurve();
+    ReadReferenceFrames();
     if (!o_.camera.empty()) {
       const CameraFile cf = ReadCameraFile(o_.camera);
       if (cf.model != "radtan")
@@ -422,14 +423,88 @@ class Registration {
                                                                          first->file, first - manifest_.photos.begin()));
   }
 
+  // The manifest's dark frame and flat field (linear values, as the photos are decoded): the
+  // black level, and the relative illumination gain (flat - dark) / its mean over the central
+  // tenth of the image (width and height / 10), per pixel and channel.
+  void ReadReferenceFrames() {
+    if (manifest_.dark_frame.empty() && manifest_.flat_field.empty()) return;
+    if (!sum_.response.empty())
+      ThrowBadInput("'{}': dark_frame and flat_field need linear photos (--hdr-response linear), not --hdr-response {}",
+                    manifest_path_.string(), o_.hdr.response);
+    auto read = [&](const std::string& file) {
+      Image im = ReadPhoto(dir_ / file, nullptr, input_);
+      if (!manifest_.photos.empty()) {  // the photos must match (checked against the first one's camera)
+        const CameraModel& cam = manifest_.photos[0].camera;
+        if (cam.width > 0 && (im.width != cam.width || im.height != cam.height))
+          ThrowBadInput("'{}' is {}x{} px but the photos' camera is {}x{}: reference frames must come from the same camera",
+                        (dir_ / file).string(), im.width, im.height, cam.width, cam.height);
+      }
+      return im;
+    };
+    if (!manifest_.dark_frame.empty()) dark_ = read(manifest_.dark_frame);
+    if (manifest_.flat_field.empty()) return;
+    Image flat = read(manifest_.flat_field);
+    if (!dark_.pixels.empty()) {
+      CheckSameSize(flat, dark_, manifest_.flat_field, manifest_.dark_frame);
+      for (std::size_t i = 0; i < flat.pixels.size(); ++i) flat.pixels[i] -= dark_.pixels[i];
+    }
+    const int C = flat.channels, x0 = flat.width * 9 / 20, x1 = std::max(x0 + 1, flat.width * 11 / 20),
+              y0 = flat.height * 9 / 20, y1 = std::max(y0 + 1, flat.height * 11 / 20);
+    std::vector<double> center(static_cast<std::size_t>(C), 0.0);
+    for (int y = y0; y < y1; ++y)
+      for (int x = x0; x < x1; ++x)
+        for (int c = 0; c < C; ++c) center[static_cast<std::size_t>(c)] += flat.at(x, y, c);
+    for (int c = 0; c < C; ++c) {
+      const double mean = center[static_cast<std::size_t>(c)] / double((x1 - x0) * (y1 - y0));
+      if (!(mean > 0.01))
+        ThrowBadInput("'{}': channel {} is {:.3g} of full scale at the image center (dark frame subtracted): a flat "
+                      "field must be a photo of a uniformly lit white target filling the frame",
+                      (dir_ / manifest_.flat_field).string(), c, mean);
+      for (int y = 0; y < flat.height; ++y)
+        for (int x = 0; x < flat.width; ++x) {
+          float& g = flat.at(x, y, c);
+          g = static_cast<float>(g / mean);
+          // A flat field is a photo of a uniformly lit white target: nowhere near black.
+          if (!(g >= 0.05f))
+            ThrowBadInput("'{}': pixel ({}, {}) channel {} is {:.3g} of the image center's level (dark frame "
+                          "subtracted): a flat field must be a photo of a uniformly lit white target filling the "
+                          "frame, nowhere below 0.05 of its center",
+                          (dir_ / manifest_.flat_field).string(), x, y, c, g);
+        }
+    }
+    gain_ = std::move(flat);
+  }
+
+  static void CheckSameSize(const Image& a, const Image& b, const std::string& fa, const std::string& fb) {
+    if (a.width != b.width || a.height != b.height || a.channels != b.channels)
+      ThrowBadInput("'{}' is {}x{} px with {} channel(s) but '{}' is {}x{} with {}: the photos and reference frames "
+                    "must have one size",
+                    fa, a.width, a.height, a.channels, fb, b.width, b.height, b.channels);
+  }
+
+  // Dark frame and flat field applied to a linear image (a merged bracket's dark frame is
+  // subtracted per exposure by MergeBracket: subtract_dark false).
+  void Correct(Image& im, const std::string& file, bool subtract_dark) const {
+    if (subtract_dark && !dark_.pixels.empty()) {
+      CheckSameSize(im, dark_, file, manifest_.dark_frame);
+      for (std::size_t i = 0; i < im.pixels.size(); ++i) im.pixels[i] = std::max(0.0f, im.pixels[i] - dark_.pixels[i]);
+    }
+    if (!gain_.pixels.empty()) {
+      CheckSameSize(im, gain_, file, manifest_.flat_field);
+      for (std::size_t i = 0; i < im.pixels.size(); ++i) im.pixels[i] /= gain_.pixels[i];
+    }
+  }
+
   // The photo's linear image: one photo as read (through the response curve if one was
-  // recovered), or a bracket merged to value / exposure (then `*exposure_out` = 1).
+  // recovered), or a bracket merged to value / exposure (then `*exposure_out` = 1); the dark
+  // frame subtracted and the flat field divided out.
   HdrMerge LoadPhoto(const PhotoEntry& e, std::vector<std::string>* warnings, double* exposure_out) const {
     *exposure_out = e.exposure;
     HdrMerge m;
     if (e.brackets.empty()) {
       m.radiance = ReadPhoto(dir_ / e.file, warnings, input_);
       if (!sum_.response.empty()) ApplyResponse(m.radiance, sum_.response, e.file);
+      Correct(m.radiance, e.file, true);
       return m;
     }
     std::vector<Image> stored;
@@ -441,7 +516,11 @@ class Registration {
       files.push_back(b.file);
     }
     *exposure_out = 1;
-    return MergeBracket(stored, exposures, files, sum_.response, o_.hdr);
+    for (std::size_t k = 0; k < stored.size() && !dark_.pixels.empty(); ++k)
+      CheckSameSize(stored[k], dark_, files[k], manifest_.dark_frame);
+    m = MergeBracket(stored, exposures, files, sum_.response, o_.hdr, dark_.pixels.empty() ? nullptr : &dark_);
+    Correct(m.radiance, e.file, false);
+    return m;
   }
 
   // Reads one photo, detects its markers, fits its geometry and checks that the sample is in view.
@@ -700,6 +779,7 @@ class Registration {
   std::map<std::string, PhotoTruth> truth_;
   TagDetectorOptions detector_;
   ImageReadOptions input_;
+  Image dark_, gain_;  // the manifest's dark frame and flat-field gain (empty = none)
   double S_ = 0;  // sample side, mm
   std::vector<PhotoGeometry> geoms_;
   std::vector<int> view_list_, light_list_;

@@ -139,6 +139,10 @@ void PhotoOptions::Check() const {
   BTF_CHECK_OPTION(std::isfinite(grid_spacing) && grid_spacing > 0 && grid_spacing < 2, "grid-spacing", "(0, 2)");
   BTF_CHECK_OPTION(std::isfinite(exposure) && exposure >= 0, "exposure", ">= 0 (0 = auto)");
   BTF_CHECK_OPTION(std::isfinite(noise) && noise >= 0 && noise <= 1, "noise", "0..1 of full scale");
+  BTF_CHECK_OPTION(std::isfinite(vignetting) && vignetting >= 0 && vignetting <= 0.9, "vignetting", "0..0.9");
+  BTF_CHECK_OPTION(std::isfinite(dark_level) && dark_level >= 0 && dark_level <= 0.2, "dark-level", "0..0.2 of full scale");
+  BTF_CHECK_OPTION((vignetting == 0 && dark_level == 0) || response_gamma == 0, "vignetting",
+                   "and dark-level apply to linear sensor values: not with response-gamma");
   BTF_CHECK_OPTION(brackets.empty() || (brackets.size() >= 2 && brackets.size() <= 16), "brackets", "2..16 exposures");
   for (double b : brackets) BTF_CHECK_OPTION(std::isfinite(b) && b > 0 && b <= 1e6, "brackets", "factors in (0, 1e6]");
   BTF_CHECK_OPTION(brackets.empty() || format != "exr", "brackets", "an integer format (exr does not clip)");
@@ -428,6 +432,32 @@ PhotoSummary SynthesizePhotos(const PhotoOptions& o, const SvbrdfModel& model, c
   wopt.srgb = o.transfer == "srgb";
   wopt.jpeg_quality = o.jpeg_quality;
   const std::string ext = o.format == "exr" ? ".exr" : (o.format == "jpeg" ? ".jpg" : ".png");
+  // Relative illumination and the black level per pixel (channels alike).
+  const std::size_t np = static_cast<std::size_t>(o.width) * o.height;
+  std::vector<double> gain(np, 1.0), dark(np, 0.0);
+  const double cx = 0.5 * o.width, cy = 0.5 * o.height, r2_corner = cx * cx + cy * cy;
+  for (std::size_t p = 0; p < np; ++p) {
+    const double dx = double(p % std::size_t(o.width)) + 0.5 - cx, dy = double(p / std::size_t(o.width)) + 0.5 - cy;
+    gain[p] = 1 - o.vignetting * (dx * dx + dy * dy) / r2_corner;
+    if (o.dark_level > 0) dark[p] = o.dark_level * (0.5 + HashUniform(o.seed, 0x5eed0da4c, p));
+  }
+  if (o.vignetting > 0 || o.dark_level > 0) {
+    // Reference photos, in the photos' format: the dark frame, and the flat field (a white target
+    // at 0.8 of full scale at the image center), each with the photos' black level.
+    const int C = 3;
+    Image dark_img(o.width, o.height, C), flat_img(o.width, o.height, C);
+    for (std::size_t i = 0; i < dark_img.pixels.size(); ++i) {
+      dark_img.pixels[i] = static_cast<float>(dark[i / C]);
+      flat_img.pixels[i] = static_cast<float>(std::min(1.0, 0.8 * gain[i / C] + dark[i / C]));
+    }
+    manifest.dark_frame = "dark" + ext;
+    manifest.flat_field = "flat" + ext;
+    WriteImage(dir / manifest.dark_frame, dark_img, wopt);
+    WriteImage(dir / manifest.flat_field, flat_img, wopt);
+    manifest.extra["vignetting"] = {{"relative_illumination", "1 - v (r / r_corner)^2, r from the image center"},
+                                    {"v", o.vignetting}};
+    manifest.extra["dark_level"] = {{"dark", "level (0.5 + u), u uniform per pixel (fixed pattern)"}, {"level", o.dark_level}};
+  }
   for (std::size_t k = 0; k < pairs.size(); ++k) {
     reporter.Progress(k, pairs.size(), "photos");
     const auto [vi, li] = pairs[k];
@@ -449,7 +479,7 @@ PhotoSummary SynthesizePhotos(const PhotoOptions& o, const SvbrdfModel& model, c
       const std::uint64_t stream = (k + b * pairs.size()) * 2;  // bracket 0: the single photo's noise
       Image shot = img;
       for (std::size_t i = 0; i < shot.pixels.size(); ++i) {
-        double x = eb * img.pixels[i];
+        double x = eb * gain[i / std::size_t(img.channels)] * img.pixels[i] + dark[i / std::size_t(img.channels)];
         if (o.noise > 0) {  // Box-Muller on a hash: the same noise whatever the thread count
           const double u1 = std::max(HashUniform(o.seed, stream + 1, i), 1e-300), u2 = HashUniform(o.seed, stream + 2, i);
           x += o.noise * std::sqrt(-2 * std::log(u1)) * std::cos(2 * kPi * u2);

@@ -60,6 +60,11 @@ struct PhotoOptions {
   double response_gamma = 0;      // camera response (0 = none): code = bias(min(1, x)^(1 / gamma)), 8-bit formats
   double response_bias = 0.5;     // Schlick's bias(y) = y / ((1 / b - 2) (1 - y) + 1); 0.5 = no bias
   double noise = 0;               // Gaussian read noise, SD as a fraction of full scale
+  // Lens and sensor non-uniformity, with reference photos written beside the photos (dark.EXT,
+  // flat.EXT; named in the manifest) when set:
+  double vignetting = 0;          // relative illumination 1 - vignetting (r / r_corner)^2 (r from the image center)
+  double dark_level = 0;          // black level: dark(x, y) = dark_level (0.5 + u(x, y)), u a fixed
+                                  // pattern uniform in [0, 1), as a fraction of full scale
   std::uint64_t seed = 1;         // noise seed
   void Check() const;
 };

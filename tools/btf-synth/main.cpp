@@ -209,6 +209,10 @@ int main(int argc, char** argv) {
                  "Camera response: code = bias(x^(1/G)) (0 = none; png8/jpeg with --transfer linear)");
   cp->add_option("--response-bias", po.response_bias, "Camera response: Schlick bias b in (0, 1) (0.5 = none)");
   cp->add_option("--noise", po.noise, "Gaussian read noise SD, fraction of full scale");
+  cp->add_option("--vignetting", po.vignetting,
+                 "Lens relative illumination 1 - v (r / r_corner)^2 (0 = none; writes flat.EXT, named in the manifest)");
+  cp->add_option("--dark-level", po.dark_level,
+                 "Sensor black level with a fixed pattern, fraction of full scale (0 = none; writes dark.EXT)");
   cp->add_option("--seed", po.seed, "Noise seed");
   cp->add_option("--sample-tiles", po.sample_tiles, "Sample side in tiles");
   cp->add_option("--module-mm", po.module_mm, "Marker module size, mm (0 = sample side / 20)");
