@@ -38,6 +38,8 @@ class SchneiderReferenceDecoder {
     nv_ = fn.at("view_grid");
     nl_ = fn.at("light_grid");
     channels_ = j.at("texture").at("channels");
+    const auto& cos_included = j.at("values").at("cos_theta_i_included");
+    cos_theta_i_included_ = cos_included.is_boolean() ? cos_included.get<bool>() : cos_included.get<int>() != 0;
     height_ = j.at("texture").at("height");
     width_ = j.at("texture").at("width");
     aw_ = atlas.at("width");
@@ -73,6 +75,7 @@ class SchneiderReferenceDecoder {
   int width() const { return width_; }
   int channels() const { return channels_; }
   int functions() const { return functions_; }
+  bool cos_theta_i_included() const { return cos_theta_i_included_; }
   // Terms of texel (x, y): [0] = offset, [1 + f] = weight of function f (scale folded in).
   const float* terms(int y, int x) const { return &terms_[(std::size_t(y) * width_ + x) * (1 + functions_)]; }
   // Largest |stored - exact| of a normalised function value t (manifest quantisation_error_bound.per_t).
@@ -155,6 +158,7 @@ class SchneiderReferenceDecoder {
   int clusters_ = 0, functions_ = 0, nv_ = 0, nl_ = 0, channels_ = 0, height_ = 0, width_ = 0;
   int aw_ = 0, ah_ = 0, ad_ = 0, pages_ = 0, tiles_x_ = 0, tiles_y_ = 0;
   double quantization_bound_ = 0;
+  bool cos_theta_i_included_ = false;
   std::vector<float> tex_;  // normalised values t, as a GPU samples them
   std::vector<float> terms_;
   std::vector<std::uint16_t> index_;
