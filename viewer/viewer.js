@@ -2,7 +2,9 @@
 // files, btf_schneider.glsl included) and draws a plane or a cylinder under a point light or a
 // sampled sky. The surface point of each pixel is the analytic intersection of the pixel's ray
 // (camera -> rasterised proxy fragment) with the shape, as in the CPU renderer
-// (libbtf/eval/render.cpp), so both draw the same (uv, wi, wo) per pixel.
+// (libbtf/eval/render.cpp), so both draw the same (uv, wi, wo) per pixel: the ray is built from
+// gl_FragCoord and the camera's basis exactly as the CPU's Camera::Ray, not from the rasterised
+// position (whose interpolation differs by a fraction of a pixel).
 // Modes (?mode=): view (interactive), shot (one frame -> PNG data URL), eval (btf_eval at the
 // queries in /job/queries.f32 -> float results), bench (ms per frame).
 import * as THREE from 'three';
@@ -101,7 +103,9 @@ void main() {
 function sceneFragmentShader(glsl) {
   return `${glsl}
 in vec3 vWorld;
-uniform vec3 camPos;
+uniform vec3 camPos, camForward, camRight, camUp;
+uniform float tanHalf;
+uniform vec2 viewport;
 uniform int shape;         // 0 = patch, 1 = cylinder
 uniform int lighting;      // 0 = point, 1 = environment
 uniform float tiles, radius, lightIntensity, exposure, background;
@@ -146,7 +150,8 @@ float srgb(float v) {
 }
 
 void main() {
-  vec3 o = camPos, d = normalize(vWorld - camPos);
+  vec2 s = (2.0 * gl_FragCoord.xy / viewport - 1.0) * tanHalf * vec2(viewport.x / viewport.y, 1.0);
+  vec3 o = camPos, d = normalize(camForward + s.x * camRight + s.y * camUp);
   vec3 p, n, tu, tv; vec2 uv;
   vec3 L = vec3(background);
   if (hitShape(o, d, p, n, tu, tv, uv)) {
@@ -199,7 +204,8 @@ function srgbEncode(v) {
 function buildScene(exp, sc) {
   const uniforms = {
     ...exp.uniforms,
-    camPos: { value: new THREE.Vector3() }, shape: { value: sc.shape === 'cylinder' ? 1 : 0 },
+    camPos: { value: new THREE.Vector3() }, camForward: { value: new THREE.Vector3() }, camRight: { value: new THREE.Vector3() },
+    camUp: { value: new THREE.Vector3() }, tanHalf: { value: 0 }, viewport: { value: new THREE.Vector2() }, shape: { value: sc.shape === 'cylinder' ? 1 : 0 },
     lighting: { value: sc.lighting === 'environment' ? 1 : 0 }, tiles: { value: sc.tiles },
     radius: { value: sc.cylinder_radius }, lightIntensity: { value: sc.light.intensity },
     exposure: { value: sc.exposure }, background: { value: sc.background },
@@ -252,7 +258,18 @@ function draw(renderer, view, cam, sc) {
   // The background radiance, tone-mapped like the shape (three.js's clear colour would be colour-managed).
   gl.clearColor(bg, bg, bg, 1);
   gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
-  view.uniforms.camPos.value.copy(cam.position);
+  // The camera basis as the CPU renderer builds it: forward, right = forward x world up, up = right x forward.
+  cam.updateMatrixWorld();
+  const u = view.uniforms, fwd = new THREE.Vector3();
+  cam.getWorldDirection(fwd);
+  u.camPos.value.copy(cam.position);
+  u.camForward.value.copy(fwd);
+  u.camRight.value.crossVectors(fwd, cam.up).normalize();
+  u.camUp.value.crossVectors(u.camRight.value, fwd);
+  u.tanHalf.value = Math.tan((cam.fov * Math.PI) / 360);
+  const size = new THREE.Vector2();
+  renderer.getDrawingBufferSize(size);
+  u.viewport.value.copy(size);
   renderer.render(view.scene, cam);
 }
 
