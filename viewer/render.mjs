@@ -2,7 +2,8 @@
 // btf-eval render-web and the browser tests; docs/viewer.md). Usage:
 //   node render.mjs --export DIR --job DIR --mode shot|eval|bench --out FILE
 //                   [--chromium /usr/bin/chromium] [--timeout SECONDS] [--frames N]
-// shot: the frame as a PNG (the canvas's own pixels); eval: float32 [N][3] btf_eval values at
+// shot: the frame as a PNG (the canvas's own pixels); page: a screenshot of the interactive page
+// (mode=view, with its controls and ms per frame) as a PNG; eval: float32 [N][3] btf_eval values at
 // JOB/queries.f32; bench: JSON with ms per frame. JOB/scene.json holds the scene (size, camera,
 // light, exposure). Prints one JSON line (renderer, timings); exit 0 on success, 1 on failure.
 import fs from 'node:fs';
@@ -32,14 +33,19 @@ try {
   page.on('console', (m) => logs.push(`${m.type()}: ${m.text()}`));
   page.on('pageerror', (e) => logs.push(`pageerror: ${e.message}`));
   const t0 = Date.now();
-  await page.goto(`${url}index.html?mode=${a.mode}&job=1&frames=${a.frames || 10}`, { timeout: timeoutMs });
+  const pageMode = a.mode === 'page' ? 'view' : a.mode;
+  await page.goto(`${url}index.html?mode=${pageMode}&job=1&frames=${a.frames || 10}`, { timeout: timeoutMs });
   await page.waitForFunction(() => window.btfStatus && window.btfStatus.done, null, { timeout: timeoutMs, polling: 100 });
   const st = await page.evaluate(() => window.btfStatus);
   if (st.error) throw new Error(`${st.error}\n${logs.join('\n')}`);
   const r = st.result;
   const tmp = `${a.out}.tmp-${process.pid}`;
   let summary = { mode: a.mode, seconds: (Date.now() - t0) / 1000, renderer: r.renderer };
-  if (a.mode === 'shot') {
+  if (a.mode === 'page') {
+    await page.waitForTimeout(500);  // the HUD's ms per frame is written after the first frame
+    await page.screenshot({ path: tmp, type: 'png' });
+    summary = { ...summary, width: scene.width, height: scene.height };
+  } else if (a.mode === 'shot') {
     fs.writeFileSync(tmp, Buffer.from(r.png.replace(/^data:image\/png;base64,/, ''), 'base64'));
     summary = { ...summary, width: r.width, height: r.height };
   } else if (a.mode === 'eval') {

@@ -411,7 +411,7 @@ function interactive(renderer, view, cam, sc, exp) {
     requestAnimationFrame(frame);
   };
   frame();
-  status.result = { interactive: true };
+  status.result = { interactive: true, renderer: glRendererName(renderer) };
 }
 
 main().then(() => (status.done = true), (e) => { status.error = String(e && e.stack || e); status.done = true;

@@ -246,22 +246,28 @@ bool ChromiumAvailable(const BrowserOptions& b) {
 }
 
 nlohmann::json WebRenderSummary::ToJson() const {
-  return {{"output", output}, {"scene", scene}, {"width", width}, {"height", height}, {"renderer", renderer}, {"seconds", seconds}};
+  return {{"output", output}, {"scene", scene}, {"width", width},          {"height", height},
+          {"renderer", renderer}, {"seconds", seconds}, {"benchmark", benchmark}};
 }
 
 std::string WebRenderSummary::Report() const {
-  return fmt::format("{}: {} at {} x {} in headless Chromium ({}), {:.1f} s\n", output, scene, width, height, renderer, seconds);
+  std::string r = fmt::format("{}: {} at {} x {} in headless Chromium ({}), {:.1f} s\n", output, scene, width, height, renderer, seconds);
+  if (benchmark.is_object())
+    r += fmt::format("benchmark: {:.1f} ms per frame at {} x {} (median of {} frames; min {:.1f}, max {:.1f})\n",
+                     benchmark.value("median_ms", 0.0), benchmark.value("width", 0), benchmark.value("height", 0),
+                     benchmark.value("frames", 0), benchmark.value("min_ms", 0.0), benchmark.value("max_ms", 0.0));
+  return r;
 }
 
 WebRenderSummary RenderWeb(const BrowserOptions& b, const RenderOptions& scene, double exposure,
                            const std::filesystem::path& export_dir, const std::filesystem::path& png,
-                           const std::string& scene_name) {
+                           const std::string& scene_name, bool page) {
   if (!(std::isfinite(exposure) && exposure > 0)) ThrowUsage("invalid option 'exposure': must be > 0");
   JobDir job;
   WriteTextFileAtomic(job.path() / "scene.json", ViewerSceneJson(scene, exposure).dump());
   const auto shot = job.path() / "shot.png";
   const auto t0 = std::chrono::steady_clock::now();
-  const nlohmann::json j = RunRender(b, export_dir, job, "shot", shot);
+  const nlohmann::json j = RunRender(b, export_dir, job, page ? "page" : "shot", shot);
   const std::string bytes = [&] {
     std::ifstream in(shot, std::ios::binary);
     std::stringstream s;

@@ -67,15 +67,17 @@ struct WebRenderSummary {
   std::string output, renderer, scene;
   int width = 0, height = 0;
   double seconds = 0;  // node + browser, wall clock
+  nlohmann::json benchmark;  // BenchmarkWeb's result when frames were timed, else null
   nlohmann::json ToJson() const;
   std::string Report() const;
 };
 
 // Renders the export at `export_dir` in headless Chromium (software WebGL2) and writes the frame
-// as an sRGB PNG (atomically) to `png`.
+// as an sRGB PNG (atomically) to `png`. With `page`, the PNG is a screenshot of the interactive
+// page instead (its controls and ms per frame over the first frame).
 WebRenderSummary RenderWeb(const BrowserOptions& browser, const RenderOptions& scene, double exposure,
                            const std::filesystem::path& export_dir, const std::filesystem::path& png,
-                           const std::string& scene_name = "");
+                           const std::string& scene_name = "", bool page = false);
 
 // btf_eval of the export's GLSL in the browser at N queries (float [N][8]: u, v, wi xyz, wo xyz);
 // returns float [N][3]. `renderer` (if non-null) gets the WebGL renderer string.

@@ -31,6 +31,7 @@ struct SceneFlags {
   std::string source, output, scene = "patch-point", size = "280x224";
   double exposure = 1;
   int port = 8000, frames = 0;
+  bool page = false;
   btf::BrowserOptions browser;
   int width = 0, height = 0;  // from size
   void Check() {
@@ -52,16 +53,6 @@ struct SceneFlags {
   btf::RenderOptions Scene() const { return btf::WebSceneOptions(scene, width, height); }
 };
 
-struct BenchSummary {
-  nlohmann::json j;
-  nlohmann::json ToJson() const { return j; }
-  std::string Report() const {
-    return fmt::format("{} x {}: {:.1f} ms per frame (median of {}; min {:.1f}, max {:.1f}) in headless Chromium ({})\n",
-                       j.value("width", 0), j.value("height", 0), j.value("median_ms", 0.0), j.value("frames", 0),
-                       j.value("min_ms", 0.0), j.value("max_ms", 0.0), j.value("renderer", ""));
-  }
-};
-
 int RunView(SceneFlags& f) {
   f.Check();
   fmt::print("btf-eval view: serving {} at {} (Ctrl-C to stop)\n", f.source, btf::ViewerUrl(f.port));
@@ -71,9 +62,9 @@ int RunView(SceneFlags& f) {
 
 int RunRenderWeb(const CLI::App& app, const btf::cli::CommonFlags& common, SceneFlags& f) {
   f.Check();
-  const btf::WebRenderSummary s = btf::RenderWeb(f.browser, f.Scene(), f.exposure, f.source, f.output, f.scene);
+  btf::WebRenderSummary s = btf::RenderWeb(f.browser, f.Scene(), f.exposure, f.source, f.output, f.scene, f.page);
+  if (f.frames > 0) s.benchmark = btf::BenchmarkWeb(f.browser, f.Scene(), f.exposure, f.source, f.frames);
   btf::cli::PrintSummary(app, common, s);
-  if (f.frames > 0) btf::cli::PrintSummary(app, common, BenchSummary{btf::BenchmarkWeb(f.browser, f.Scene(), f.exposure, f.source, f.frames)});
   return 0;
 }
 
@@ -212,6 +203,7 @@ int main(int argc, char** argv) {
   web->add_option("-o,--output", wf.output, "PNG to write (sRGB)")->required();
   web->add_option("--frames", wf.frames, "Also time this many frames and report ms per frame (0 = no benchmark)");
   web->add_option("--timeout", wf.browser.timeout_s, "Seconds allowed for one browser run");
+  web->add_flag("--page", wf.page, "Write a screenshot of the interactive page (controls, ms per frame) instead of the frame");
   add_scene(web, wf);
   add_browser(web, wf);
   btf::cli::AddCommonFlags(*web, common);
