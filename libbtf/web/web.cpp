@@ -1,8 +1,9 @@
 #include "libbtf/web/web.h"
 
 #include <fcntl.h>
-#include <spawn.h>
+#include <sys/prctl.h>
 #include <sys/wait.h>
+#include <csignal>
 #include <unistd.h>
 
 #include <algorithm>
@@ -18,8 +19,6 @@
 #include "libbtf/core/error.h"
 #include "libbtf/io/dataset_io.h"
 #include "libbtf/io/file_kind.h"
-
-extern char** environ;
 
 namespace btf {
 
@@ -71,22 +70,43 @@ std::string ReadText(const std::filesystem::path& p) {
 }
 
 // Runs argv with stdout and stderr to files (empty path: inherited); returns the exit status
-// (128 + signal when killed).
+// (128 + signal when killed). The child gets SIGTERM when this process dies (an interrupted
+// btf-eval leaves no server or browser behind).
 int Spawn(const std::vector<std::string>& args, const std::filesystem::path& out, const std::filesystem::path& err) {
-  posix_spawn_file_actions_t fa;
-  posix_spawn_file_actions_init(&fa);
-  if (!out.empty()) posix_spawn_file_actions_addopen(&fa, 1, out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  if (!err.empty()) posix_spawn_file_actions_addopen(&fa, 2, err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
   std::vector<char*> argv;
   for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
   argv.push_back(nullptr);
-  pid_t pid;
-  const int rc = posix_spawnp(&pid, argv[0], &fa, nullptr, argv.data(), environ);
-  posix_spawn_file_actions_destroy(&fa);
-  if (rc != 0) ThrowUsage("cannot run '{}': {} (install it, or name it with --node)", args[0], std::strerror(rc));
+  int pipe_fd[2];  // reports an exec failure (errno) to the parent; closed on exec
+  if (::pipe2(pipe_fd, O_CLOEXEC) != 0) ThrowIo("cannot create a pipe: {}", std::strerror(errno));
+  const pid_t parent = ::getpid();
+  const pid_t pid = ::fork();
+  if (pid < 0) ThrowIo("cannot fork: {}", std::strerror(errno));
+  if (pid == 0) {  // child: async-signal-safe calls only
+    ::close(pipe_fd[0]);
+    ::prctl(PR_SET_PDEATHSIG, SIGTERM);
+    if (::getppid() != parent) ::_exit(127);
+    if (!out.empty()) {
+      const int fd = ::open(out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+      if (fd >= 0) ::dup2(fd, 1), ::close(fd);
+    }
+    if (!err.empty()) {
+      const int fd = ::open(err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+      if (fd >= 0) ::dup2(fd, 2), ::close(fd);
+    }
+    ::execvp(argv[0], argv.data());
+    const int e = errno;
+    [[maybe_unused]] const auto w = ::write(pipe_fd[1], &e, sizeof e);
+    ::_exit(127);
+  }
+  ::close(pipe_fd[1]);
+  int exec_errno = 0;
+  const auto n = ::read(pipe_fd[0], &exec_errno, sizeof exec_errno);
+  ::close(pipe_fd[0]);
   int status = 0;
-  while (waitpid(pid, &status, 0) < 0)
+  while (::waitpid(pid, &status, 0) < 0)
     if (errno != EINTR) ThrowIo("waiting for '{}' failed: {}", args[0], std::strerror(errno));
+  if (n == static_cast<ssize_t>(sizeof exec_errno))
+    ThrowUsage("cannot run '{}': {} (install it, or name it with --node)", args[0], std::strerror(exec_errno));
   if (WIFEXITED(status)) return WEXITSTATUS(status);
   return 128 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
 }
