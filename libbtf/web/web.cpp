@@ -115,9 +115,9 @@ int Spawn(const std::vector<std::string>& args, const std::filesystem::path& out
 nlohmann::json RunRender(const BrowserOptions& b, const std::filesystem::path& export_dir, const JobDir& job,
                          const std::string& mode, const std::filesystem::path& out, int frames = 10) {
   b.Check();
-  if (!ChromiumAvailable(b)) ThrowUsage("Chromium not found at '{}' (Debian: apt-get install chromium; or --chromium PATH)", b.chromium);
   if (!std::filesystem::exists(export_dir / "manifest.json"))
     ThrowBadInput("'{}' is not an export folder (no manifest.json; make one with btf-compress export)", export_dir.string());
+  if (!ChromiumAvailable(b)) ThrowUsage("Chromium not found at '{}' (Debian: apt-get install chromium; or --chromium PATH)", b.chromium);
   const auto viewer = ViewerDir(b);
   const auto log_out = job.path() / "node.out", log_err = job.path() / "node.err";
   const int rc = Spawn({b.node, (viewer / "render.mjs").string(), "--export", std::filesystem::absolute(export_dir).string(),
