@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <fstream>
 #include <random>
 
 #include "libbtf/compress/codec.h"
@@ -23,7 +24,8 @@ namespace {
 // Irawan 2006 twill, bonn81 x bonn81, 16 x 16 texels (about 5 s), LPCA k = 4, c = 4; exported
 // on the default 16^2 x 16^2 grid (u8) into one atlas page, in `dir`; the codec file too when
 // `codec_file` is not empty.
-void TwillExport(const std::filesystem::path& dir, const std::filesystem::path& codec_file = {}) {
+void TwillExport(const std::filesystem::path& dir, const std::filesystem::path& codec_file = {},
+                 const SchneiderExportOptions& options = {}) {
   static const Codec codec = [] {
     const auto model = MakeModel("irawan2006", "twill", nlohmann::json::object());
     BtfOptions bo;
@@ -36,7 +38,7 @@ void TwillExport(const std::filesystem::path& dir, const std::filesystem::path& 
     co.components = 4;
     return test::CompressDataset(d, co);
   }();
-  ExportSchneider({}, codec, dir);
+  ExportSchneider(options, codec, dir);
   if (!codec_file.empty()) WriteCodec(codec_file, codec);
 }
 
@@ -167,23 +169,25 @@ TEST(Browser, CylinderEnvOfTheExportIsCloseToTheCpuRenderOfTheCodec) { ExpectSce
 // btf_schneider.glsl evaluated in the browser (a float render target) against the reference
 // decoder. Queries: every texel at grid nodes of the view and light squares (where trilinear
 // filtering is exact), and random (uv, wi, wo) anywhere on the hemispheres.
-TEST(Browser, GlslMatchesTheReferenceDecoder) {
+void ExpectGlslMatchesTheReferenceDecoder(const SchneiderExportOptions& options, int expected_pages) {
   SKIP_WITHOUT_CHROMIUM();
   const auto dir = test::TempDir() / "export";
-  TwillExport(dir);
+  TwillExport(dir, {}, options);
   const SchneiderReferenceDecoder ref(dir);
+  std::ifstream in(dir / "manifest.json");
+  ASSERT_EQ(nlohmann::json::parse(in)["atlas"]["pages"], expected_pages);
   std::vector<float> q;
   std::vector<int> texel_x, texel_y;
   auto add = [&](int x, int y, const Vec2& uv, const Vec3& wi, const Vec3& wo) {
     for (double v : {uv.x(), uv.y(), wi.x(), wi.y(), wi.z(), wo.x(), wo.y(), wo.z()}) q.push_back(float(v));
     texel_x.push_back(x), texel_y.push_back(y);
   };
-  const int W = ref.width(), H = ref.height(), n = 16;
+  const int W = ref.width(), H = ref.height(), n = options.view_grid, m = options.light_grid;
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x)
       for (int i = 0; i < 4; ++i) {
-        const int sv = (x * 5 + i * 3) % n, tv = (y * 3 + i * 7) % n, sl = (x + y + i * 5) % n, tl = (x * 7 + i) % n;
-        add(x, y, Vec2((x + 0.5) / W, 1 - (y + 0.5) / H), HemisphereFromSquare(Vec2(GridCoordinate(sl, n), GridCoordinate(tl, n))),
+        const int sv = (x * 5 + i * 3) % n, tv = (y * 3 + i * 7) % n, sl = (x + y + i * 5) % m, tl = (x * 7 + i) % m;
+        add(x, y, Vec2((x + 0.5) / W, 1 - (y + 0.5) / H), HemisphereFromSquare(Vec2(GridCoordinate(sl, m), GridCoordinate(tl, m))),
             HemisphereFromSquare(Vec2(GridCoordinate(sv, n), GridCoordinate(tv, n))));
       }
   const std::size_t grid_queries = texel_x.size();
@@ -210,7 +214,7 @@ TEST(Browser, GlslMatchesTheReferenceDecoder) {
       (i < grid_queries ? worst_grid : worst_any) = std::max(i < grid_queries ? worst_grid : worst_any, r);
     }
   }
-  std::cout << "GLSL vs reference decoder (" << renderer << "): worst |diff| / sum|w| = " << worst_grid << " at grid nodes, "
+  std::cout << "GLSL vs reference decoder (" << options.storage << ", " << expected_pages << " page(s); " << renderer << "): worst |diff| / sum|w| = " << worst_grid << " at grid nodes, "
             << worst_any << " at random points; the storage bound per t is " << ref.quantization_bound() << "\n";
   // At grid nodes only float32 arithmetic differs (the filter weights are 0 or 1): well below the
   // storage quantisation (1/510), so the GLSL reproduces the decoder to the quantisation bound.
@@ -219,6 +223,18 @@ TEST(Browser, GlslMatchesTheReferenceDecoder) {
   // the grid nodes keeps the GLSL within a tenth of the quantisation bound everywhere. (Hardware
   // that rounds filter weights to 8 bits could differ by up to 3/256 for t in [0, 1].)
   EXPECT_LE(worst_any, 0.1 * ref.quantization_bound());
+}
+
+TEST(Browser, GlslMatchesTheReferenceDecoder) { ExpectGlslMatchesTheReferenceDecoder({}, 1); }
+
+// Half floats (RGBA16F upload) and an atlas of two pages (btf_atlas1): 4 x 4 tiles of 16^2 per
+// 64-texel page side, 20 functions; light grid 8 for depth 64.
+TEST(Browser, GlslMatchesTheReferenceDecoderWithHalfFloatsOnTwoPages) {
+  SchneiderExportOptions o;
+  o.storage = "f16";
+  o.atlas_side = 64;
+  o.light_grid = 8;
+  ExpectGlslMatchesTheReferenceDecoder(o, 2);
 }
 
 }  // namespace
