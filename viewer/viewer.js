@@ -91,22 +91,28 @@ function dataTexture(data, w, h, format) {
 
 const vertexShader = `
 precision highp float;
-in vec3 position;
+in vec3 position, normal, tangent;
+in vec2 uv;
 uniform mat4 modelMatrix, viewMatrix, projectionMatrix;
-out vec3 vWorld;
+out vec3 vWorld, vNormal, vTangent;
+out vec2 vUv;
 void main() {
   vec4 w = modelMatrix * vec4(position, 1.0);
   vWorld = w.xyz;
+  vNormal = mat3(modelMatrix) * normal;
+  vTangent = mat3(modelMatrix) * tangent;
+  vUv = uv;
   gl_Position = projectionMatrix * viewMatrix * w;
 }`;
 
 function sceneFragmentShader(glsl) {
   return `${glsl}
-in vec3 vWorld;
+in vec3 vWorld, vNormal, vTangent;
+in vec2 vUv;
 uniform vec3 camPos, camForward, camRight, camUp;
 uniform float tanHalf;
 uniform vec2 viewport;
-uniform int shape;         // 0 = patch, 1 = cylinder
+uniform int shape;         // 0 = patch, 1 = cylinder (both analytic), 2 = draped cloth (the mesh itself)
 uniform int lighting;      // 0 = point, 1 = environment
 uniform float tiles, radius, lightIntensity, exposure, background;
 uniform vec3 lightPos;
@@ -154,7 +160,20 @@ void main() {
   vec3 o = camPos, d = normalize(camForward + s.x * camRight + s.y * camUp);
   vec3 p, n, tu, tv; vec2 uv;
   vec3 L = vec3(background);
-  if (hitShape(o, d, p, n, tu, tv, uv)) {
+  bool hit;
+  if (shape == 2) {
+    // The cloth mesh: its interpolated position, normal and u tangent (Gram-Schmidt), uv as meshed.
+    p = vWorld;
+    n = normalize(vNormal);
+    if (!gl_FrontFacing) n = -n;
+    tu = normalize(vTangent - n * dot(n, vTangent));
+    tv = cross(n, tu);
+    uv = vUv * tiles;
+    hit = true;
+  } else {
+    hit = hitShape(o, d, p, n, tu, tv, uv);
+  }
+  if (hit) {
     L = vec3(0.0);
     vec3 toCam = normalize(camPos - p);
     vec3 wo = vec3(dot(toCam, tu), dot(toCam, tv), dot(toCam, n));
@@ -218,20 +237,44 @@ function buildScene(exp, sc) {
   });
   // Proxies slightly larger than the analytic shapes: every pixel of the shape gets a fragment.
   const meshes = {
+    cloth: new THREE.Mesh(clothGeometry(), material),
     patch: new THREE.Mesh(new THREE.PlaneGeometry(2.02, 2.02), material),
     cylinder: new THREE.Mesh(
       new THREE.CylinderGeometry(sc.cylinder_radius * 1.01, sc.cylinder_radius * 1.01, 2.02, 256, 1, true).rotateZ(-Math.PI / 2),
       material),
   };
   const scene = new THREE.Scene();
-  scene.add(meshes.patch, meshes.cylinder);
+  scene.add(meshes.patch, meshes.cylinder, meshes.cloth);
   const setShape = (name) => {
-    uniforms.shape.value = name === 'cylinder' ? 1 : 0;
-    meshes.patch.visible = name !== 'cylinder';
-    meshes.cylinder.visible = name === 'cylinder';
+    uniforms.shape.value = { patch: 0, cylinder: 1, cloth: 2 }[name] ?? 0;
+    for (const [k, m] of Object.entries(meshes)) m.visible = k === (name in meshes ? name : 'patch');
   };
   setShape(sc.shape);
   return { scene, uniforms, setShape };
+}
+
+// A cloth draped over a ball: a 2.4 x 2.4 sheet (161 x 161 vertices) whose height falls off from
+// the ball's top with radial folds; uv spans the sheet at the plane's texel size (1.2 repeats of
+// `tiles` per 2.4 units), tangents along u from central differences of the positions.
+function clothGeometry() {
+  const n = 160, g = new THREE.PlaneGeometry(2.4, 2.4, n, n);
+  const pos = g.attributes.position, uv = g.attributes.uv;
+  for (let i = 0; i < pos.count; ++i) {
+    const x = pos.getX(i), y = pos.getY(i), r = Math.hypot(x, y), phi = Math.atan2(y, x);
+    const fold = 1 + 0.12 * Math.sin(7 * phi) * Math.min(1, Math.max(0, (r - 0.35) / 0.5));
+    pos.setZ(i, 0.75 * Math.exp(-(r * r) / 0.45) * fold);
+    uv.setXY(i, uv.getX(i) * 1.2, uv.getY(i) * 1.2);
+  }
+  g.computeVertexNormals();
+  const tangent = new Float32Array(pos.count * 3);
+  for (let row = 0; row <= n; ++row)
+    for (let col = 0; col <= n; ++col) {
+      const i = row * (n + 1) + col, a = row * (n + 1) + Math.max(0, col - 1), b = row * (n + 1) + Math.min(n, col + 1);
+      const t = new THREE.Vector3(pos.getX(b) - pos.getX(a), pos.getY(b) - pos.getY(a), pos.getZ(b) - pos.getZ(a)).normalize();
+      tangent.set([t.x, t.y, t.z], i * 3);
+    }
+  g.setAttribute('tangent', new THREE.BufferAttribute(tangent, 3));
+  return g;
 }
 
 function makeCamera(sc) {
