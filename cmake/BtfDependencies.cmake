@@ -10,6 +10,10 @@ find_package(CLI11 REQUIRED)
 find_package(OpenImageIO REQUIRED)
 find_package(OpenCV REQUIRED COMPONENTS core imgproc calib3d aruco)
 find_package(apriltag REQUIRED)
+# libzip (Debian: libzip-dev) reads zipped image sets; through pkg-config, since libzip's CMake
+# package needs its command-line tools installed.
+find_package(PkgConfig REQUIRED)
+pkg_check_modules(LIBZIP REQUIRED IMPORTED_TARGET libzip)
 set(HDF5_PREFER_PARALLEL OFF)
 find_package(HDF5 REQUIRED COMPONENTS C)
 if(NOT TARGET btf_hdf5)

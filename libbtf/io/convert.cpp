@@ -12,8 +12,9 @@ void ConvertOptions::Check() const {
   BTF_CHECK_OPTION(storage == "float32" || storage == "float16", "storage", "must be float32 or float16");
   BTF_CHECK_OPTION(deflate_level >= 0 && deflate_level <= 9, "deflate_level", "must be 0 to 9");
   BTF_CHECK_OPTION(scan_lines_per_chunk >= 1, "scan_lines_per_chunk", "must be at least 1");
-  BTF_CHECK_OPTION(layout.empty() || layout == "ubo2003" || layout == "atrium" || layout == "pattern", "layout",
-                   "must be ubo2003, atrium or pattern");
+  BTF_CHECK_OPTION(layout.empty() || layout == "ubo2003" || layout == "atrium" || layout == "ubo2014-images" ||
+                       layout == "pattern",
+                   "layout", "must be ubo2003, atrium, ubo2014-images or pattern");
   BTF_CHECK_OPTION(pattern.empty() == (layout != "pattern"), "pattern", "given with --layout pattern, and only then");
 }
 

@@ -1,8 +1,11 @@
-// Image sets (UBO2003, ATRIUM, any folder by a name pattern) imported into a dataset file.
+// Image sets (UBO2003, ATRIUM, UBO2014 Dome 1, any folder by a name pattern; a folder or a zip
+// archive) imported into a dataset file.
 #include <algorithm>
 #include <cmath>
 #include <regex>
 #include <vector>
+
+#include <zip.h>
 
 #include "libbtf/core/error.h"
 #include "libbtf/io/convert.h"
@@ -12,11 +15,114 @@ namespace btf {
 
 namespace {
 
+// The files of an image set: a folder (recursively) or a zip archive (libzip; entries are decoded
+// from memory, nothing is unpacked). Names are relative paths with '/' separators.
+class ImageSetFiles {
+ public:
+  explicit ImageSetFiles(const std::filesystem::path& input) : input_(input) {
+    std::error_code ec;
+    if (std::filesystem::is_directory(input, ec)) {
+      for (auto it = std::filesystem::recursive_directory_iterator(input, ec);
+           !ec && it != std::filesystem::recursive_directory_iterator(); it.increment(ec))
+        if (it->is_regular_file()) names_.push_back(std::filesystem::relative(it->path(), input).generic_string());
+      if (ec) ThrowIo("cannot list '{}': {}", input.string(), ec.message());
+      return;
+    }
+    if (!std::filesystem::is_regular_file(input, ec))
+      ThrowIo("'{}' does not exist: give a folder of images or a zip archive of them", input.string());
+    int err = 0;
+    zip_ = zip_open(input.c_str(), ZIP_RDONLY | ZIP_CHECKCONS, &err);
+    if (!zip_) {
+      zip_error_t e;
+      zip_error_init_with_code(&e, err);
+      const std::string why = zip_error_strerror(&e);
+      zip_error_fini(&e);
+      ThrowBadInput("'{}' is neither a folder nor a readable zip archive ({}): give a folder of images or a zip of them",
+                    input.string(), why);
+    }
+    const zip_int64_t n = zip_get_num_entries(zip_, 0);
+    for (zip_int64_t i = 0; i < n; ++i) {
+      const char* name = zip_get_name(zip_, zip_uint64_t(i), ZIP_FL_ENC_GUESS);
+      if (!name) ThrowBadInput("'{}': entry {} of the zip archive has no readable name: {}", input.string(), i, zip_strerror(zip_));
+      std::string rel = name;
+      if (rel.empty() || rel.back() == '/') continue;  // a folder entry
+      names_.push_back(std::move(rel));
+      index_.push_back(zip_uint64_t(i));
+    }
+  }
+  ~ImageSetFiles() {
+    if (zip_) zip_discard(zip_);
+  }
+  ImageSetFiles(const ImageSetFiles&) = delete;
+  ImageSetFiles& operator=(const ImageSetFiles&) = delete;
+
+  const std::filesystem::path& input() const { return input_; }
+  bool is_zip() const { return zip_ != nullptr; }
+  const std::vector<std::string>& names() const { return names_; }
+  // For messages: the file's path, or "archive.zip:entry".
+  std::string Display(std::size_t i) const {
+    return zip_ ? input_.string() + ":" + names_[i] : (input_ / names_[i]).string();
+  }
+  Image Read(std::size_t i, const ImageReadOptions& options) const {
+    if (!zip_) return ReadImage(input_ / names_[i], options);
+    zip_stat_t st;
+    zip_stat_init(&st);
+    if (zip_stat_index(zip_, index_[i], 0, &st) != 0 || !(st.valid & ZIP_STAT_SIZE))
+      ThrowBadInput("'{}': cannot read the size of the zip entry: {}", Display(i), zip_strerror(zip_));
+    CheckAllocation(double(st.size), fmt::format("zip entry '{}'", Display(i)));
+    std::string bytes(static_cast<std::size_t>(st.size), '\0');
+    zip_file_t* f = zip_fopen_index(zip_, index_[i], 0);
+    if (!f) ThrowBadInput("'{}': cannot open the zip entry: {}; re-create the archive", Display(i), zip_strerror(zip_));
+    std::size_t got = 0;
+    zip_int64_t r = 0;
+    while (got < bytes.size() && (r = zip_fread(f, bytes.data() + got, bytes.size() - got)) > 0) got += std::size_t(r);
+    // Reading to the end makes libzip check the entry's CRC.
+    char extra = 0;
+    if (r >= 0) r = zip_fread(f, &extra, 1);
+    const std::string why = r < 0 ? zip_file_strerror(f) : "";
+    zip_fclose(f);
+    if (r != 0 || got != bytes.size())
+      ThrowBadInput("'{}': the zip entry is corrupt ({}); re-download or re-create the archive", Display(i),
+                    r < 0 ? why : fmt::format("{} bytes where its header says {}", got + std::size_t(r > 0), st.size));
+    return DecodeImage(Display(i), bytes, options);
+  }
+
+ private:
+  std::filesystem::path input_;
+  zip_t* zip_ = nullptr;
+  std::vector<std::string> names_;
+  std::vector<zip_uint64_t> index_;  // zip entry of each name
+};
+
+// The named layouts: UBO2003 and ATRIUM (Bonn 81, NNNNN = 81 light + view, integer degrees) and
+// ubo2014-images (UBO2014 Dome 1, NNNNN = 151 light + view, degrees with optional decimals, matched
+// to the Dome 1 table within 0.5 degrees, the precision of the angles Bonn stores).
+struct Layout {
+  std::regex names;
+  std::string example;  // for messages
+  Sampling sampling;
+  long index_base = 0;
+  double tolerance_deg = 0.01;
+};
+
+Layout NamedLayout(const std::string& layout) {
+  constexpr const char* kAngle = R"(([0-9]+(?:\.[0-9]+)?))";
+  if (layout == "ubo2003" || layout == "atrium") {
+    const std::string ext = layout == "ubo2003" ? "jpg|jpeg|JPG|JPEG" : "hdr|HDR";
+    return {std::regex(R"((\d+) tl(\d+) pl(\d+) tv(\d+) pv(\d+)\.()" + ext + ")"),
+            layout == "ubo2003" ? "'NNNNN tlTTT plPPP tvTTT pvPPP.jpg'" : "'NNNNN tlTTT plPPP tvTTT pvPPP.hdr'",
+            Sampling::Bonn81(), 81, 0.01};
+  }
+  return {std::regex(fmt::format(R"((\d+) tl{0} pl{0} tv{0} pv{0}\.(exr|hdr|png|jpg|jpeg|tif|tiff|EXR|HDR|PNG|JPG|JPEG|TIF|TIFF))",
+                                 kAngle)),
+          "'NNNNN tlT plP tvT pvP.exr' (or .hdr, .png, .jpg, .tif)", Sampling::Ubo151(), 151, 0.5};
+}
+
 struct Found {
-  std::filesystem::path path;
-  std::string rel;  // relative to the folder, for messages
+  std::size_t file = 0;  // in ImageSetFiles::names()
+  std::string name;      // for messages
   double tv = 0, pv = 0, tl = 0, pl = 0;
-  long index = -1;  // ubo2003 / atrium: NNNNN
+  long index = -1;  // named layouts: NNNNN
 };
 
 // Angles in degrees, canonical: phi in [0, 360), 0 at the pole; rounded to 1e-6 degrees.
@@ -27,12 +133,14 @@ std::pair<double, double> Canonical(double theta, double phi) {
   return {std::round(theta * 1e6) / 1e6, std::round(phi * 1e6) / 1e6};
 }
 
-// Index of (theta, phi) degrees in `s`, or -1 (within 0.01 degrees).
-int IndexIn(const Sampling& s, double theta, double phi) {
+// Index of (theta, phi) degrees in `s` (the nearest direction within tolerance_deg), or -1.
+int IndexIn(const Sampling& s, double theta, double phi, double tolerance_deg = 0.01) {
   const Vec3 d = DirectionFromAngles(theta * kPi / 180, phi * kPi / 180);
+  int best = -1;
+  double best_dist = tolerance_deg * kPi / 180;
   for (int i = 0; i < s.size(); ++i)
-    if ((s[i] - d).norm() < 0.01 * kPi / 180) return i;
-  return -1;
+    if (const double e = (s[i] - d).norm(); e < best_dist) best = i, best_dist = e;
+  return best;
 }
 
 // The regular expression of a --pattern: fields {tv} {pv} {tl} {pl} (each exactly once) become
@@ -62,50 +170,40 @@ std::regex PatternRegex(const std::string& pattern, std::vector<std::string>* fi
   return std::regex(re);
 }
 
-std::vector<Found> Scan(const ConvertOptions& o, const std::filesystem::path& folder) {
-  std::error_code ec;
-  if (!std::filesystem::is_directory(folder, ec))
-    ThrowBadInput("'{}' is not a folder: --layout {} imports a folder of images (zip files are not read: unpack it)",
-                  folder.string(), o.layout);
+std::vector<Found> Scan(const ConvertOptions& o, const ImageSetFiles& files) {
   std::vector<std::string> fields;
   const bool pattern = o.layout == "pattern";
-  const std::regex re = pattern ? PatternRegex(o.pattern, &fields)
-                                : std::regex(o.layout == "ubo2003" ? R"((\d+) tl(\d+) pl(\d+) tv(\d+) pv(\d+)\.(jpg|jpeg|JPG|JPEG))"
-                                                                   : R"((\d+) tl(\d+) pl(\d+) tv(\d+) pv(\d+)\.(hdr|HDR))");
+  const Layout named = pattern ? Layout{} : NamedLayout(o.layout);
+  const std::regex re = pattern ? PatternRegex(o.pattern, &fields) : named.names;
   if (!pattern) fields = {"tl", "pl", "tv", "pv"};
   std::vector<Found> found;
-  for (auto it = std::filesystem::recursive_directory_iterator(folder, ec);
-       !ec && it != std::filesystem::recursive_directory_iterator(); it.increment(ec)) {
-    if (!it->is_regular_file()) continue;
-    const std::string rel = std::filesystem::relative(it->path(), folder).generic_string();
-    const std::string name = pattern ? rel : it->path().filename().string();
+  for (std::size_t i = 0; i < files.names().size(); ++i) {
+    const std::string& rel = files.names()[i];
+    const std::string name = pattern ? rel : std::filesystem::path(rel).filename().string();
     std::smatch m;
     if (!std::regex_match(name, m, re)) continue;
-    Found f{it->path(), rel};
+    Found f{i, files.Display(i)};
     const int first = pattern ? 1 : 2;
     if (!pattern) f.index = std::stol(m[1].str());
-    for (std::size_t i = 0; i < 4; ++i) {
-      const double x = std::stod(m[first + int(i)].str());
-      if (fields[i] == "tv") f.tv = x;
-      if (fields[i] == "pv") f.pv = x;
-      if (fields[i] == "tl") f.tl = x;
-      if (fields[i] == "pl") f.pl = x;
+    for (std::size_t k = 0; k < 4; ++k) {
+      const double x = std::stod(m[first + int(k)].str());
+      if (fields[k] == "tv") f.tv = x;
+      if (fields[k] == "pv") f.pv = x;
+      if (fields[k] == "tl") f.tl = x;
+      if (fields[k] == "pl") f.pl = x;
     }
     for (double theta : {f.tv, f.tl})
       if (!(theta >= 0 && theta < 90))
-        ThrowBadInput("'{}': theta {} degrees is outside [0, 90): not a direction above the surface", it->path().string(),
-                      theta);
+        ThrowBadInput("'{}': theta {} degrees is outside [0, 90): not a direction above the surface", f.name, theta);
     found.push_back(std::move(f));
   }
-  if (ec) ThrowIo("cannot list '{}': {}", folder.string(), ec.message());
   if (found.empty())
-    ThrowBadInput("no file in '{}' is named as --layout {} expects ({}): check the folder and the layout", folder.string(),
-                  o.layout,
-                  pattern ? o.pattern
-                          : std::string(o.layout == "ubo2003" ? "'NNNNN tlTTT plPPP tvTTT pvPPP.jpg'"
-                                                              : "'NNNNN tlTTT plPPP tvTTT pvPPP.hdr'"));
-  // A fixed order, whatever the file system lists first.
-  std::sort(found.begin(), found.end(), [](const Found& a, const Found& b) { return a.rel < b.rel; });
+    ThrowBadInput("no file in '{}' is named as --layout {} expects ({}): check the {} and the layout",
+                  files.input().string(), o.layout, pattern ? o.pattern : named.example, files.is_zip() ? "archive" : "folder");
+  // A fixed order, whatever the file system or archive lists first.
+  std::sort(found.begin(), found.end(), [&](const Found& a, const Found& b) {
+    return files.names()[a.file] < files.names()[b.file];
+  });
   return found;
 }
 
@@ -132,52 +230,64 @@ std::string Describe(const Sampling& s, int i) {
   return fmt::format("(theta {:.6g}, phi {:.6g})", a.theta * 180 / kPi, a.phi * 180 / kPi);
 }
 
+// The file name a named layout expects for (light l, view v).
+std::string MissingName(const std::string& layout, const Layout& named, const Sampling& lights, int l,
+                        const Sampling& views, int v) {
+  const Angles li = lights.angles(l), vi = views.angles(v);
+  const auto deg = [](double rad) { return rad * 180 / kPi; };
+  if (layout == "ubo2014-images")  // phi as Bonn's table has it, in [0, 360)
+    return fmt::format("'{:05d} tl{:g} pl{:g} tv{:g} pv{:g}.*'", named.index_base * l + v, std::round(deg(li.theta) * 10) / 10,
+                       std::round(Canonical(deg(li.theta), deg(li.phi)).second * 10) / 10, std::round(deg(vi.theta) * 10) / 10,
+                       std::round(Canonical(deg(vi.theta), deg(vi.phi)).second * 10) / 10);
+  return fmt::format("'{:05d} tl{:03.0f} pl{:03.0f} tv{:03.0f} pv{:03.0f}.{}'", named.index_base * l + v, deg(li.theta),
+                     deg(li.phi), deg(vi.theta), deg(vi.phi), layout == "ubo2003" ? "jpg" : "hdr");
+}
+
 }  // namespace
 
 ConvertSummary ImportImageSet(const ConvertOptions& options, const std::filesystem::path& folder,
                               const std::filesystem::path& output, const Reporter& reporter) {
   options.Check();
-  if (options.layout.empty()) ThrowUsage("ImportImageSet needs a --layout (ubo2003, atrium or pattern)");
+  if (options.layout.empty()) ThrowUsage("ImportImageSet needs a --layout (ubo2003, atrium, ubo2014-images or pattern)");
   const std::string target = ConvertTarget(options, output);
   if (target != "dataset")
     ThrowUsage("image sets are imported into a dataset (.h5), not {}: convert the dataset afterwards", target);
   Timer timer;
-  const std::vector<Found> found = Scan(options, folder);
+  const ImageSetFiles files(folder);
+  const std::vector<Found> found = Scan(options, files);
+  const bool pattern = options.layout == "pattern";
+  const Layout named = pattern ? Layout{} : NamedLayout(options.layout);
   Sampling views, lights;
-  if (options.layout == "pattern") {
+  if (pattern) {
     std::vector<std::pair<double, double>> v, l;
     for (const Found& f : found) v.emplace_back(f.tv, f.pv), l.emplace_back(f.tl, f.pl);
     views = DirectionsOf(v, "image-set:views");
     lights = DirectionsOf(l, "image-set:lights");
   } else {
-    views = lights = Sampling::Bonn81();
+    views = lights = named.sampling;
   }
   const int V = views.size(), L = lights.size();
   std::vector<const Found*> grid(std::size_t(V) * L, nullptr);
   for (const Found& f : found) {
-    const int v = IndexIn(views, f.tv, f.pv), l = IndexIn(lights, f.tl, f.pl);
+    const int v = IndexIn(views, f.tv, f.pv, named.tolerance_deg), l = IndexIn(lights, f.tl, f.pl, named.tolerance_deg);
     if (v < 0 || l < 0)
-      ThrowBadInput("'{}': {} direction (theta {}, phi {}) is not one of the Bonn 81 directions {} names", f.path.string(),
-                    v < 0 ? "view" : "light", v < 0 ? f.tv : f.tl, v < 0 ? f.pv : f.pl, options.layout);
-    if (f.index >= 0 && f.index != 81L * l + v)
-      ThrowBadInput("'{}': image number {} disagrees with its directions (light {}, view {}: 81 x light + view = {})",
-                    f.path.string(), f.index, l, v, 81L * l + v);
+      ThrowBadInput("'{}': {} direction (theta {}, phi {}) is not one of the {} directions {} names", f.name,
+                    v < 0 ? "view" : "light", v < 0 ? f.tv : f.tl, v < 0 ? f.pv : f.pl, views.size(), options.layout);
+    if (f.index >= 0 && f.index != named.index_base * l + v)
+      ThrowBadInput("'{}': image number {} disagrees with its directions (light {}, view {}: {} x light + view = {})",
+                    f.name, f.index, l, v, named.index_base, named.index_base * l + v);
     const Found*& slot = grid[std::size_t(v) * L + l];
     if (slot)
-      ThrowBadInput("'{}' and '{}' are both view {} light {}: remove one", slot->path.string(), f.path.string(),
-                    Describe(views, v), Describe(lights, l));
+      ThrowBadInput("'{}' and '{}' are both view {} light {}: remove one", slot->name, f.name, Describe(views, v),
+                    Describe(lights, l));
     slot = &f;
   }
   std::vector<std::string> missing;
   for (int v = 0; v < V; ++v)
     for (int l = 0; l < L; ++l)
       if (!grid[std::size_t(v) * L + l])
-        missing.push_back(options.layout == "pattern"
-                              ? fmt::format("view {} light {}", Describe(views, v), Describe(lights, l))
-                              : fmt::format("'{:05d} tl{:03.0f} pl{:03.0f} tv{:03.0f} pv{:03.0f}.{}'", 81 * l + v,
-                                            lights.angles(l).theta * 180 / kPi, lights.angles(l).phi * 180 / kPi,
-                                            views.angles(v).theta * 180 / kPi, views.angles(v).phi * 180 / kPi,
-                                            options.layout == "ubo2003" ? "jpg" : "hdr"));
+        missing.push_back(pattern ? fmt::format("view {} light {}", Describe(views, v), Describe(lights, l))
+                                  : MissingName(options.layout, named, lights, l, views, v));
   if (!missing.empty() && !options.allow_missing) {
     const std::size_t shown = std::min<std::size_t>(missing.size(), 3);
     ThrowBadInput("'{}': {} of {} images are missing ({}{}); add them, or give --allow-missing to write them as 0",
@@ -189,7 +299,7 @@ ConvertSummary ImportImageSet(const ConvertOptions& options, const std::filesyst
   if (options.layout == "ubo2003") read.colorspace = "srgb";  // 8-bit sRGB by definition, tagged or not
   const Found* first = nullptr;
   for (const Found* f : grid) first = first ? first : f;
-  const Image ref = ReadImage(first->path, read);
+  const Image ref = files.Read(first->file, read);
   DatasetInfo info;
   info.units = "relative";
   info.channel_names.clear();
@@ -214,15 +324,15 @@ ConvertSummary ImportImageSet(const ConvertOptions& options, const std::filesyst
         w.WriteImage(v, l, zero.data());
         continue;
       }
-      const Image img = ReadImage(f->path, read);
+      const Image img = files.Read(f->file, read);
       if (img.width != ref.width || img.height != ref.height || img.channels != ref.channels)
         ThrowBadInput("'{}' is {} x {} with {} channels, but '{}' is {} x {} with {}: every image of a set must have "
                       "one size",
-                      f->path.string(), img.width, img.height, img.channels, first->path.string(), ref.width,
+                      f->name, img.width, img.height, img.channels, first->name, ref.width,
                       ref.height, ref.channels);
       for (std::size_t i = 0; i < img.pixels.size(); ++i)
         if (!std::isfinite(img.pixels[i]))
-          ThrowBadInput("'{}': pixel ({}, {}) channel {} is {}", f->path.string(), i / img.channels % img.width,
+          ThrowBadInput("'{}': pixel ({}, {}) channel {} is {}", f->name, i / img.channels % img.width,
                         i / img.channels / img.width, i % img.channels, img.pixels[i]);
       w.WriteImage(v, l, img.pixels.data());
     }

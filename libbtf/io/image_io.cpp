@@ -86,14 +86,11 @@ void ImageReadOptions::Check() const {
 
 Image ReadImage(const std::filesystem::path& path) { return ReadImage(path, ImageReadOptions()); }
 
-Image ReadImage(const std::filesystem::path& path, const ImageReadOptions& options) {
-  options.Check();
-  const std::string name = path.string();
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec)) ThrowIo("cannot read image '{}': no such file", name);
-  // Read with checked system calls (a failing disk is an I/O error, not a corrupt image), then
-  // decoded from memory.
-  std::string bytes = ReadFileBytes(path, "image");
+namespace {
+// Decodes `bytes`, an image file whose format the extension of `name` gives; `name` is used in
+// messages. Formats without I/O proxies are opened from `file`, or refused when there is none.
+Image Decode(const std::string& name, const std::string& bytes, const ImageReadOptions& options,
+             const std::filesystem::path* file) {
   CheckExrHeader(name, bytes);
   // Measurement data: a 4th channel is data, never premultiplied alpha to be (un)associated.
   OIIO::ImageSpec config;
@@ -105,15 +102,18 @@ Image ReadImage(const std::filesystem::path& path, const ImageReadOptions& optio
   // The reader is chosen by the extension and given the bytes; OpenImageIO 2.4's open(name, ...)
   // would read the file again from disk. Formats without I/O proxies, or unknown extensions, are
   // opened from the file.
-  std::string format = Lower(path.extension().string());
-  if (!format.empty()) format.erase(0, 1);
+  const std::string ext = Lower(std::filesystem::path(name).extension().string());
+  const std::string format = ext.empty() ? ext : ext.substr(1);
   auto in = format.empty() ? nullptr : OIIO::ImageInput::create(format, false, &proxy_config, &proxy);
   OIIO::ImageSpec opened;
   if (in && in->supports("ioproxy")) {
     if (!in->open(name, opened, proxy_config)) ThrowBadInput("cannot read image '{}': {}", name, in->geterror());
-  } else {
-    in = OIIO::ImageInput::open(name, &config);
+  } else if (file) {
+    in = OIIO::ImageInput::open(file->string(), &config);
     if (!in) ThrowBadInput("cannot read image '{}': {}", name, OIIO::geterror());
+  } else {
+    ThrowBadInput("cannot read image '{}': its format{} cannot be decoded from memory (only from a file): unpack it",
+                  name, format.empty() ? "" : " '" + format + "'");
   }
   const OIIO::ImageSpec& spec = in->spec();
   if (spec.width < 1 || spec.height < 1 || spec.nchannels < 1)
@@ -125,7 +125,6 @@ Image ReadImage(const std::filesystem::path& path, const ImageReadOptions& optio
   const bool integer = spec.format.basetype != OIIO::TypeDesc::FLOAT && spec.format.basetype != OIIO::TypeDesc::HALF &&
                        spec.format.basetype != OIIO::TypeDesc::DOUBLE;
   const std::string cs = Lower(spec.get_string_attribute("oiio:ColorSpace"));
-  const std::string ext = Lower(path.extension().string());
   bool srgb = integer && (cs == "srgb" || (cs.empty() && (ext == ".png" || ext == ".jpg" || ext == ".jpeg")));
   if (integer && options.colorspace != "auto") srgb = options.colorspace == "srgb";
   if (integer && options.colorspace == "gamma") {
@@ -140,6 +139,22 @@ Image ReadImage(const std::filesystem::path& path, const ImageReadOptions& optio
       if (static_cast<int>(i % std::size_t(spec.nchannels)) != alpha) img.pixels[i] = SrgbToLinear(img.pixels[i]);
   }
   return img;
+}
+
+}  // namespace
+
+Image ReadImage(const std::filesystem::path& path, const ImageReadOptions& options) {
+  options.Check();
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) ThrowIo("cannot read image '{}': no such file", path.string());
+  // Read with checked system calls (a failing disk is an I/O error, not a corrupt image), then
+  // decoded from memory.
+  return Decode(path.string(), ReadFileBytes(path, "image"), options, &path);
+}
+
+Image DecodeImage(const std::string& name, const std::string& bytes, const ImageReadOptions& options) {
+  options.Check();
+  return Decode(name, bytes, options, nullptr);
 }
 
 void WriteImage(const std::filesystem::path& path, const Image& image, const ImageWriteOptions& options) {

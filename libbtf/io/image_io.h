@@ -41,6 +41,10 @@ struct ImageReadOptions {
 // normalized to [0, 1] for integer types. Throws btf::Error naming the file.
 Image ReadImage(const std::filesystem::path& path);
 Image ReadImage(const std::filesystem::path& path, const ImageReadOptions& options);
+// The same for the bytes of an image file held in memory (an entry of a zip archive, say): the
+// extension of `name` picks the format, and messages name `name`. Formats OpenImageIO cannot
+// decode from memory are btf::Error (bad input).
+Image DecodeImage(const std::string& name, const std::string& bytes, const ImageReadOptions& options = {});
 // Writes atomically. Values are clamped to the integer range for integer formats.
 void WriteImage(const std::filesystem::path& path, const Image& image, const ImageWriteOptions& options = {});
 

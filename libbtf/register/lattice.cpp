@@ -332,7 +332,8 @@ void TileAverageOptions::Check() const {
   BTF_CHECK_OPTION(trim_fraction >= 0 && trim_fraction < 0.5, "trim_fraction", "0 <= value < 0.5");
 }
 
-AveragedTile AverageTiles(const Image& image, const Lattice& L, const TileAverageOptions& o) {
+AveragedTile AverageTiles(const Image& image, const Lattice& L, const TileAverageOptions& o,
+                          const std::vector<std::uint8_t>* mask) {
   o.Check();
   const double cell = std::abs(Cross(L.a1, L.a2));
   if (!(cell > 1)) ThrowBadInput("tile averaging: the unit tile is smaller than a texel (area {})", cell);
@@ -365,33 +366,56 @@ AveragedTile AverageTiles(const Image& image, const Lattice& L, const TileAverag
   out.tile = Image(T, T, ch);
   out.stddev = Image(T, T, ch);
   out.tiles_used = n;
-  const int trim = static_cast<int>(std::floor(o.trim_fraction * n));
-#pragma omp parallel for schedule(dynamic, 1)
+  BTF_CHECK(!mask || mask->size() == std::size_t(image.width) * image.height);
+  // Whether the bicubic footprint of position p touches a masked texel.
+  auto masked = [&](const Vec2& p) {
+    const int x0 = static_cast<int>(std::floor(p.x())) - 1, y0 = static_cast<int>(std::floor(p.y())) - 1;
+    for (int y = std::max(y0, 0); y <= std::min(y0 + 3, image.height - 1); ++y)
+      for (int x = std::max(x0, 0); x <= std::min(x0 + 3, image.width - 1); ++x)
+        if ((*mask)[std::size_t(y) * image.width + x]) return true;
+    return false;
+  };
+  int without_valid = 0;
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : without_valid)
   for (int tj = 0; tj < T; ++tj) {
     std::vector<float> vals(static_cast<std::size_t>(n) * ch), v(static_cast<std::size_t>(ch)), col(static_cast<std::size_t>(n));
     for (int ti = 0; ti < T; ++ti) {
       const Vec2 off = ((ti + 0.5) / T) * L.a1 + ((tj + 0.5) / T) * L.a2;
+      int m = 0;  // valid samples, in tile order
       for (int k = 0; k < n; ++k) {
         const Vec2 p = starts[k] + off;
+        if (mask && masked(p)) continue;
         SampleCubic(image, p.x(), p.y(), false, v.data());
-        for (int c = 0; c < ch; ++c) vals[static_cast<std::size_t>(k) * ch + c] = v[c];
+        for (int c = 0; c < ch; ++c) vals[static_cast<std::size_t>(m) * ch + c] = v[c];
+        ++m;
       }
+      if (m == 0) {  // masked in every tile: all tiles, as without a mask
+        ++without_valid;
+        for (int k = 0; k < n; ++k) {
+          const Vec2 p = starts[k] + off;
+          SampleCubic(image, p.x(), p.y(), false, v.data());
+          for (int c = 0; c < ch; ++c) vals[static_cast<std::size_t>(k) * ch + c] = v[c];
+        }
+        m = n;
+      }
+      const int trim = static_cast<int>(std::floor(o.trim_fraction * m));
       for (int c = 0; c < ch; ++c) {
         double sum = 0, sum2 = 0;
-        for (int k = 0; k < n; ++k) {
+        for (int k = 0; k < m; ++k) {
           col[k] = vals[static_cast<std::size_t>(k) * ch + c];
           sum += col[k];
           sum2 += static_cast<double>(col[k]) * col[k];
         }
-        const double mean = sum / n;
-        out.stddev.at(ti, tj, c) = static_cast<float>(std::sqrt(std::max(0.0, sum2 / n - mean * mean)));
-        std::sort(col.begin(), col.end());
+        const double mean = sum / m;
+        out.stddev.at(ti, tj, c) = static_cast<float>(std::sqrt(std::max(0.0, sum2 / m - mean * mean)));
+        std::sort(col.begin(), col.begin() + m);
         double t = 0;
-        for (int k = trim; k < n - trim; ++k) t += col[k];
-        out.tile.at(ti, tj, c) = static_cast<float>(t / (n - 2 * trim));
+        for (int k = trim; k < m - trim; ++k) t += col[k];
+        out.tile.at(ti, tj, c) = static_cast<float>(t / (m - 2 * trim));
       }
     }
   }
+  out.samples_without_valid_tile = without_valid;
   return out;
 }
 

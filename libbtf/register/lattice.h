@@ -58,11 +58,15 @@ struct AveragedTile {
   Image tile;    // T x T x C; sample (i, j) at lattice coordinates ((i+0.5)/T, (j+0.5)/T)
   Image stddev;  // per-sample standard deviation across tiles (before trimming)
   int tiles_used = 0;
+  int samples_without_valid_tile = 0;  // with a mask: tile samples masked in every tile (averaged over all)
 };
 
-// Averages every complete unit tile of `image` (resampled bicubically on the lattice). Throws
-// btf::Error (bad input) if fewer than 2 complete tiles fit.
-AveragedTile AverageTiles(const Image& image, const Lattice& lattice, const TileAverageOptions& options = {});
+// Averages every complete unit tile of `image` (resampled bicubically on the lattice). With a
+// `mask` (width x height, 1 = masked texel), a tile's sample whose bicubic footprint (4 x 4
+// texels) touches a masked texel is left out of that sample's average. Throws btf::Error (bad
+// input) if fewer than 2 complete tiles fit.
+AveragedTile AverageTiles(const Image& image, const Lattice& lattice, const TileAverageOptions& options = {},
+                          const std::vector<std::uint8_t>* mask = nullptr);
 
 // The regular tiling of `tile` over a width x height image (periodic bicubic lookup).
 Image TileImage(const AveragedTile& tile, const Lattice& lattice, int width, int height);

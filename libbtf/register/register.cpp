@@ -53,36 +53,74 @@ std::pair<double, double> HomographyError(const Eigen::Matrix3d& a, const Eigen:
   return {std::sqrt(ss / 121), mx};
 }
 
-// Fraction of the sample (64 x 64 grid at z = 0) whose line of sight to the camera center crosses
-// a marker's printed area (detection square enlarged by 1/4: the quiet zone of tag36h11) at the
-// marker's height: such texels show the marker, not the cloth, in this photo.
+// Whether the line of sight from plate point p (surface, z = 0) to the camera center `cam`
+// crosses a marker's printed area (detection square enlarged by 1/4: the quiet zone of tag36h11)
+// at the marker's height: p then shows the marker, not the cloth.
+bool HiddenByMarker(const Board& board, const Vec3& cam, const Vec3& p) {
+  for (const auto& m : board.markers) {
+    if (!(m.height_mm > 0) || !(cam.z() > m.height_mm)) continue;
+    const Vec3 q = p + (m.height_mm / cam.z()) * (cam - p);
+    const Vec2 c = 0.25 * (m.corners_mm[0] + m.corners_mm[1] + m.corners_mm[2] + m.corners_mm[3]);
+    bool inside = true;
+    for (int k = 0; k < 4 && inside; ++k) {
+      const Vec2 a = c + 1.25 * (m.corners_mm[k] - c), b = c + 1.25 * (m.corners_mm[(k + 1) % 4] - c);
+      const Vec2 e = b - a, d = q.head<2>() - a;
+      // Same side of every edge as the center (convex quad, either orientation).
+      const double side = e.x() * d.y() - e.y() * d.x(), ref = e.x() * (c - a).y() - e.y() * (c - a).x();
+      inside = side * ref >= 0;
+    }
+    if (inside) return true;
+  }
+  return false;
+}
+
+Vec3 CameraCenter(const PhotoGeometry& g) {
+  return -g.camera_from_plate_rotation.transpose() * g.camera_from_plate_translation;
+}
+
+// Fraction of the sample (64 x 64 grid at z = 0) hidden behind raised markers in this photo.
 double OccludedFraction(const Board& board, const PhotoGeometry& g) {
   if (!g.has_pose) return 0;
-  const Vec3 cam = -g.camera_from_plate_rotation.transpose() * g.camera_from_plate_translation;
+  const Vec3 cam = CameraCenter(g);
   const double S = board.sample_size_mm;
   int hidden = 0;
   for (int j = 0; j < 64; ++j)
-    for (int i = 0; i < 64; ++i) {
-      const Vec3 p(-S / 2 + (i + 0.5) * S / 64, -S / 2 + (j + 0.5) * S / 64, 0);
-      for (const auto& m : board.markers) {
-        if (!(m.height_mm > 0) || !(cam.z() > m.height_mm)) continue;
-        const Vec3 q = p + (m.height_mm / cam.z()) * (cam - p);
-        const Vec2 c = 0.25 * (m.corners_mm[0] + m.corners_mm[1] + m.corners_mm[2] + m.corners_mm[3]);
-        bool inside = true;
-        for (int k = 0; k < 4 && inside; ++k) {
-          const Vec2 a = c + 1.25 * (m.corners_mm[k] - c), b = c + 1.25 * (m.corners_mm[(k + 1) % 4] - c);
-          const Vec2 e = b - a, d = q.head<2>() - a;
-          // Same side of every edge as the center (convex quad, either orientation).
-          const double side = e.x() * d.y() - e.y() * d.x(), ref = e.x() * (c - a).y() - e.y() * (c - a).x();
-          inside = side * ref >= 0;
-        }
-        if (inside) {
-          ++hidden;
-          break;
-        }
-      }
-    }
+    for (int i = 0; i < 64; ++i)
+      hidden += HiddenByMarker(board, cam, Vec3(-S / 2 + (i + 0.5) * S / 64, -S / 2 + (j + 0.5) * S / 64, 0));
   return hidden / 4096.0;
+}
+
+// Per texel of the N x N normtexture: 1 where any of 3 x 3 points spread over the texel is hidden
+// behind a raised marker (a partly hidden texel mixes marker and cloth), else 0.
+std::vector<std::uint8_t> MarkerMask(const Board& board, const PhotoGeometry& g, int n) {
+  std::vector<std::uint8_t> mask(std::size_t(n) * n, 0);
+  if (!g.has_pose) return mask;
+  const Vec3 cam = CameraCenter(g);
+  for (int row = 0; row < n; ++row)
+    for (int col = 0; col < n; ++col)
+      for (int k = 0; k < 9 && !mask[std::size_t(row) * n + col]; ++k) {
+        const Vec2 p = TexelCenterMm(col + (k % 3 - 1) / 3.0, row + (k / 3 - 1) / 3.0, n, board.sample_size_mm);
+        mask[std::size_t(row) * n + col] = HiddenByMarker(board, cam, Vec3(p.x(), p.y(), 0));
+      }
+  return mask;
+}
+
+// Fills the texels of `im` where mask = 1 with the value of the nearest unmasked texel (Euclidean
+// distance, OpenCV's labelled distance transform; ties as OpenCV breaks them).
+void FillFromNearestValid(Image& im, const std::vector<std::uint8_t>& mask) {
+  cv::Mat valid(im.height, im.width, CV_8U);
+  for (int i = 0; i < im.width * im.height; ++i) valid.data[i] = mask[std::size_t(i)] ? 255 : 0;
+  cv::Mat dist, labels;
+  cv::distanceTransform(valid, dist, labels, cv::DIST_L2, cv::DIST_MASK_PRECISE, cv::DIST_LABEL_PIXEL);
+  std::vector<int> source(static_cast<std::size_t>(im.width) * im.height + 1, -1);  // label -> texel
+  for (int i = 0; i < im.width * im.height; ++i)
+    if (!mask[std::size_t(i)]) source[static_cast<std::size_t>(labels.ptr<int>()[i])] = i;
+  for (int i = 0; i < im.width * im.height; ++i)
+    if (mask[std::size_t(i)]) {
+      const int from = source[static_cast<std::size_t>(labels.ptr<int>()[i])];
+      BTF_CHECK(from >= 0);
+      for (int c = 0; c < im.channels; ++c) im.pixels[std::size_t(i) * im.channels + c] = im.pixels[std::size_t(from) * im.channels + c];
+    }
 }
 
 // Area-averaged thumbnail.
@@ -158,6 +196,7 @@ json PhotoReport::ToJson() const {
   }
   if (exposures > 1) j["bracket"] = {{"exposures", exposures}, {"clipped_pixels", hdr_clipped_pixels}};
   if (ok) {
+    j["masked_texels"] = {{"hidden_by_markers", masked_hidden}, {"clipped", masked_clipped}};
     j["invalid_texel_fraction"] = invalid_fraction;
     j["max_texel_footprint_px"] = max_footprint_px;
   }
@@ -199,6 +238,11 @@ std::string RegisterSummary::Report() const {
   if (lattice)
     r += fmt::format("lattice: a1 = ({:.3f}, {:.3f}), a2 = ({:.3f}, {:.3f}) texels, {} yarn cell(s) per repeat\n",
                      lattice->a1.x(), lattice->a1.y(), lattice->a2.x(), lattice->a2.y(), lattice->yarn_cells_per_repeat);
+  std::size_t hidden = 0, clipped = 0;
+  for (const auto& p : reports) hidden += p.masked_hidden, clipped += p.masked_clipped;
+  if (hidden + clipped > 0)
+    r += fmt::format("masked texels: {} hidden behind raised markers, {} clipped in every exposure ({})\n", hidden, clipped,
+                     reference_view >= 0 ? "left out of tile averaging" : "filled from the nearest unmasked texel");
   for (const auto& p : reports)
     if (!p.ok) r += fmt::format("FAILED {}: {}\n", p.file, p.error);
   r += fmt::format("time: {}\n", times.Report());
@@ -324,14 +368,19 @@ class Registration {
     for (int v : order) {
       Timer t;
       std::vector<Image> tex;
-      std::map<int, const Image*> by_light = RectifyView(v, tex);
+      std::map<int, std::vector<std::uint8_t>> masks;  // by light, only photos with masked texels
+      std::map<int, const Image*> by_light = RectifyView(v, tex, masks);
       sum_.times.Add("rectify", t.Seconds());
       std::map<int, Image> averaged;
       if (o_.tile_average) {
         t.Restart();
         if (v == reference_) EstimateReferenceLattice(v, by_light);
         for (const auto& [l, im] : by_light) {
-          AveragedTile at = AverageTiles(*im, *sum_.lattice, o_.tiles);
+          const auto m = masks.find(l);
+          AveragedTile at = AverageTiles(*im, *sum_.lattice, o_.tiles, m == masks.end() ? nullptr : &m->second);
+          if (at.samples_without_valid_tile > 0)
+            sum_.reports[photo_of_.at({v, l})].warnings.push_back(fmt::format(
+                "{} tile samples are masked in every tile (averaged over all tiles there)", at.samples_without_valid_tile));
           averaged[l] = o_.tile_output == "tile" ? std::move(at.tile) : TileImage(at, *sum_.lattice, im->width, im->height);
         }
         for (auto& [l, im] : averaged) by_light[l] = &im;
@@ -450,11 +499,12 @@ class Registration {
 
   // Rectifies and normalizes every registered photo of view v (in parallel); returns the images
   // by manifest light index (photos that fail here are dropped and reported).
-  std::map<int, const Image*> RectifyView(int v, std::vector<Image>& tex) {
+  std::map<int, const Image*> RectifyView(int v, std::vector<Image>& tex, std::map<int, std::vector<std::uint8_t>>& masks) {
     std::vector<int> photos;
     for (int l : light_list_)
       if (auto it = photo_of_.find({v, l}); it != photo_of_.end()) photos.push_back(it->second);
     tex.assign(photos.size(), Image());
+    std::vector<std::vector<std::uint8_t>> mask(photos.size());
     const int n_ok = static_cast<int>(photo_of_.size());
 #pragma omp parallel for schedule(dynamic, 1)
     for (std::size_t k = 0; k < photos.size(); ++k) {
@@ -462,7 +512,7 @@ class Registration {
       const int i = photos[k];
       PhotoReport& r = sum_.reports[i];
       try {
-        tex[k] = RectifyPhoto(manifest_.photos[i], geoms_[i], r);
+        tex[k] = RectifyPhoto(manifest_.photos[i], geoms_[i], r, &mask[k]);
       } catch (const Cancelled&) {
         cancelled_ = true;
       } catch (const std::exception& ex) {
@@ -477,7 +527,16 @@ class Registration {
     if (cancelled_) throw Cancelled();
     std::map<int, const Image*> by_light;
     for (std::size_t k = 0; k < photos.size(); ++k)
-      if (sum_.reports[photos[k]].ok) by_light[manifest_.photos[photos[k]].light_index] = &tex[k];
+      if (sum_.reports[photos[k]].ok) {
+        const int l = manifest_.photos[photos[k]].light_index;
+        by_light[l] = &tex[k];
+        if (std::count(mask[k].begin(), mask[k].end(), 1) == 0) continue;
+        // Masked texels are left out of tile averaging, or else take the nearest unmasked value.
+        if (o_.tile_average)
+          masks[l] = std::move(mask[k]);
+        else
+          FillFromNearestValid(tex[k], mask[k]);
+      }
     if (by_light.empty())
       ThrowBadInput("view {}: every photo failed at rectification (first: '{}': {})", v, sum_.reports[photos[0]].file,
                     sum_.reports[photos[0]].error);
@@ -488,24 +547,30 @@ class Registration {
     return by_light;
   }
 
-  Image RectifyPhoto(const PhotoEntry& entry, const PhotoGeometry& g, PhotoReport& r) const {
+  // Rectifies and normalizes one photo; *mask gets 1 for each texel hidden behind a raised marker
+  // or touching a pixel clipped in every exposure of a bracket (counted in the report).
+  Image RectifyPhoto(const PhotoEntry& entry, const PhotoGeometry& g, PhotoReport& r, std::vector<std::uint8_t>* mask) const {
     PhotoEntry e = entry;
     const HdrMerge merged = LoadPhoto(entry, nullptr, &e.exposure);
     const PlateToPixel project = [&g](const Vec2& p, Vec2* px) { return g.Project(Vec3(p.x(), p.y(), 0), px); };
     RectifyStats st;
     Image tex = Rectify(merged.radiance, project, S_, o_.rectify, &st);
+    *mask = MarkerMask(board_, g, tex.width);
+    r.masked_hidden = static_cast<std::size_t>(std::count(mask->begin(), mask->end(), 1));
     if (merged.clipped_pixels > 0) {  // a texel touching a pixel clipped in every exposure has no value
-      const Image mask = Rectify(merged.clipped, project, S_, o_.rectify);
-      const auto n = std::count_if(mask.pixels.begin(), mask.pixels.end(), [](float x) { return x > 0; });
-      if (n > 0) {
-        std::string files;
-        for (const auto& b : entry.brackets) files += (files.empty() ? "'" : ", '") + b.file + "'";
-        ThrowBadInput("{} of the {} texels of the sample are clipped in every exposure of the bracket ({}; stored "
-                      "value >= {} of full scale{}): add a shorter exposure",
-                      n, mask.pixels.size(), files, o_.hdr.saturation,
-                      sum_.response.empty() ? "" : fmt::format(" or code > {}, the response curve's last constrained "
-                                                               "code", sum_.response.max_code));
-      }
+      const Image clipped = Rectify(merged.clipped, project, S_, o_.rectify);
+      for (std::size_t i = 0; i < mask->size(); ++i)
+        if (clipped.pixels[i] > 0) r.masked_clipped += 1, (*mask)[i] = 1;
+    }
+    if (std::count(mask->begin(), mask->end(), 0) == 0) {
+      std::string files;
+      for (const auto& b : entry.brackets) files += (files.empty() ? "'" : ", '") + b.file + "'";
+      ThrowBadInput("every texel of the sample is masked ({} hidden behind raised markers, {} clipped in every exposure{}{}{}): "
+                    "{}",
+                    r.masked_hidden, r.masked_clipped, files.empty() ? "" : " of the bracket (", files,
+                    files.empty() ? "" : fmt::format("; stored value >= {} of full scale{})", o_.hdr.saturation,
+                                                     sum_.response.empty() ? "" : fmt::format(" or code > {}, the response curve's last constrained code", sum_.response.max_code)),
+                    r.masked_clipped > 0 ? "add a shorter exposure" : "use a view where the sample is visible");
     }
     r.invalid_fraction = st.invalid_fraction;
     r.max_footprint_px = st.max_footprint_px;

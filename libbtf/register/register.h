@@ -66,6 +66,10 @@ struct PhotoReport {
   double invalid_fraction = 0, max_footprint_px = 0;
   int exposures = 1;                      // photos merged (a bracket: > 1)
   std::size_t hdr_clipped_pixels = 0;     // bracket: pixels clipped in every exposure (anywhere in the photo)
+  // Masked texels of this photo's normtexture (left out of tile averaging, or filled from the
+  // nearest unmasked texel without it): hidden behind a raised marker (a line of sight through a
+  // marker's printed area), touching a pixel clipped in every exposure of a bracket.
+  std::size_t masked_hidden = 0, masked_clipped = 0;
   std::vector<std::string> warnings;
   // With RegisterOptions::truth: RMS against the true marker corners and the true surface
   // homography over an 11 x 11 grid on the sample (px); -1 = not computed.

@@ -2,6 +2,8 @@
 // the test with known content, read back exactly; bad sets refused naming the files.
 #include <gtest/gtest.h>
 
+#include <zip.h>
+
 #include <cmath>
 #include <functional>
 
@@ -179,7 +181,8 @@ TEST(ImageSet, BadSetsAreRefusedNamingTheFiles) {
   // Nothing matches; a folder that is a file; theta beyond the horizon; a pattern without a field.
   refused(Pattern("{tv}_{pv}_{tl}_{pl}.png"), "no file in");
   ExitCode code{};
-  EXPECT_NE(test::ErrorOf([&] { ImportImageSet(p, set / "tl0_pl0_tv0_pv0.exr", dir / "out.h5"); }, &code).find("is not a folder"),
+  EXPECT_NE(test::ErrorOf([&] { ImportImageSet(p, set / "tl0_pl0_tv0_pv0.exr", dir / "out.h5"); }, &code)
+                .find("is neither a folder nor a readable zip archive"),
             std::string::npos);
   EXPECT_EQ(code, ExitCode::kBadInput);
   WriteImage(set / "tl95_pl0_tv0_pv0.exr", KnownImage(0, 0));
@@ -203,6 +206,151 @@ TEST(ImageSet, BadSetsAreRefusedNamingTheFiles) {
   EXPECT_NE(test::ErrorOf([&] { ImportImageSet(u, ubo, dir / "out.h5"); }).find("view direction (theta 16, phi 60) is not one"),
             std::string::npos);
   EXPECT_FALSE(std::filesystem::exists(dir / "out.h5"));
+}
+
+// CRC-32 (ISO 3309, the zip one), bit by bit: independent of zlib and libzip.
+std::uint32_t Crc32(const std::vector<char>& data) {
+  std::uint32_t crc = 0xffffffffu;
+  for (char ch : data) {
+    crc ^= std::uint8_t(ch);
+    for (int k = 0; k < 8; ++k) crc = crc & 1 ? (crc >> 1) ^ 0xedb88320u : crc >> 1;
+  }
+  return ~crc;
+}
+
+std::vector<char> FileBytes(const std::filesystem::path& p) {
+  std::ifstream f(p, std::ios::binary);
+  return {std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>()};
+}
+
+// A zip archive of stored (uncompressed) entries, written byte by byte from PKWARE's APPNOTE
+// (4.3.7 local file header, 4.3.12 central directory header, 4.3.16 end of central directory).
+test::Bytes StoredZip(const std::vector<std::pair<std::string, std::vector<char>>>& entries) {
+  test::Bytes zip, central;
+  for (const auto& [name, data] : entries) {
+    const std::uint32_t offset = std::uint32_t(zip.size()), crc = Crc32(data), size = std::uint32_t(data.size());
+    zip.U32(0x04034b50).U16(20).U16(0).U16(0).U16(0).U16(0x21).U32(crc).U32(size).U32(size);
+    zip.U16(std::uint16_t(name.size())).U16(0).Text(name);
+    zip.b.insert(zip.b.end(), data.begin(), data.end());
+    central.U32(0x02014b50).U16(20).U16(20).U16(0).U16(0).U16(0).U16(0x21).U32(crc).U32(size).U32(size);
+    central.U16(std::uint16_t(name.size())).U16(0).U16(0).U16(0).U16(0).U32(0).U32(offset).Text(name);
+  }
+  const std::uint32_t cd_offset = std::uint32_t(zip.size()), cd_size = std::uint32_t(central.size());
+  zip.Append(central);
+  zip.U32(0x06054b50).U16(0).U16(0).U16(std::uint16_t(entries.size())).U16(std::uint16_t(entries.size()));
+  zip.U32(cd_size).U32(cd_offset).U16(0);
+  return zip;
+}
+
+// The pattern set of PatternFolderGivesTheImagesExactly, zipped (stored entries, built byte by
+// byte, under a top folder as real archives have): the same dataset, bit for bit.
+TEST(ImageSet, ZipArchiveBuiltByteByByteGivesTheImagesExactly) {
+  const auto dir = test::TempDir();
+  std::vector<std::pair<std::string, std::vector<char>>> entries = {{"set/", {}}};
+  for (int v = 1; v >= 0; --v)
+    for (int l = 2; l >= 0; --l) {
+      const auto file = dir / "img.exr";
+      WriteImage(file, KnownImage(v, l));
+      entries.emplace_back(fmt::format("set/tv{}_pv{}/tl{}_pl{}.exr", kViews[v].first, kViews[v].second,
+                                       kLights[l].first, kLights[l].second),
+                           FileBytes(file));
+    }
+  entries.emplace_back("set/README.txt", std::vector<char>{'h', 'i'});
+  StoredZip(entries).Save(dir / "set.zip");
+  const ConvertSummary s = ImportImageSet(Pattern("set/tv{tv}_pv{pv}/tl{tl}_pl{pl}.exr"), dir / "set.zip", dir / "out.h5");
+  EXPECT_EQ(s.missing_images, 0u);
+  const Dataset d = ReadDataset(dir / "out.h5");
+  ASSERT_EQ(d.num_views(), 2);
+  ASSERT_EQ(d.num_lights(), 3);
+  for (int v = 0; v < 2; ++v)
+    for (int l = 0; l < 3; ++l)
+      for (int y = 0; y < 3; ++y)
+        for (int x = 0; x < 4; ++x)
+          for (int c = 0; c < 3; ++c)
+            ASSERT_EQ(d.image(v, l)[(std::size_t(y) * 4 + x) * 3 + c], Known(v, l, y, x, c)) << v << l << y << x << c;
+
+  // One flipped byte inside an entry's data fails its CRC: named as archive:entry, nothing written.
+  test::Bytes bad = StoredZip(entries);
+  const std::string victim = "set/tv15_pv60/tl30_pl30.exr";
+  const auto at = std::search(bad.b.begin(), bad.b.end(), victim.begin(), victim.end()) - bad.b.begin();
+  bad.b[std::size_t(at) + victim.size() + 40] ^= 0x5a;
+  bad.Save(dir / "bad.zip");
+  ExitCode code{};
+  std::string e = test::ErrorOf([&] { ImportImageSet(Pattern("set/tv{tv}_pv{pv}/tl{tl}_pl{pl}.exr"), dir / "bad.zip", dir / "o.h5"); },
+                                &code);
+  EXPECT_EQ(code, ExitCode::kBadInput);
+  EXPECT_NE(e.find((dir / "bad.zip").string() + ":" + victim + "': the zip entry is corrupt"), std::string::npos) << e;
+  EXPECT_FALSE(std::filesystem::exists(dir / "o.h5"));
+  // A truncated archive (its central directory cut off) is refused as a whole.
+  bad = StoredZip(entries);
+  bad.b.resize(bad.b.size() - 30);
+  bad.Save(dir / "cut.zip");
+  e = test::ErrorOf([&] { ImportImageSet(Pattern("set/tv{tv}_pv{pv}/tl{tl}_pl{pl}.exr"), dir / "cut.zip", dir / "o.h5"); }, &code);
+  EXPECT_EQ(code, ExitCode::kBadInput);
+  EXPECT_NE(e.find("cut.zip' is neither a folder nor a readable zip archive"), std::string::npos) << e;
+  EXPECT_FALSE(std::filesystem::exists(dir / "o.h5"));
+}
+
+// A UBO2003 set as Bonn ships it: a deflated zip with a folder per view (written by libzip, an
+// independent writer), JPEG decoded from sRGB as from a folder.
+TEST(ImageSet, DeflatedUbo2003ZipIsReadAsTheFolder) {
+  const auto dir = test::TempDir();
+  const auto folder = dir / "ubo" / "tv015_pv060";
+  std::filesystem::create_directories(folder);
+  Image img(8, 8, 3);
+  for (auto& p : img.pixels) p = 120.0f / 255.0f;
+  ImageWriteOptions jpg;
+  jpg.jpeg_quality = 100;
+  const std::string name = "00083 tl015 pl000 tv015 pv060.jpg";  // light 1 (15, 0), view 2 (15, 60)
+  WriteImage(folder / name, img, jpg);
+  const std::vector<char> bytes = FileBytes(folder / name);
+  int err = 0;
+  zip_t* z = zip_open((dir / "ubo.zip").c_str(), ZIP_CREATE | ZIP_TRUNCATE, &err);
+  ASSERT_NE(z, nullptr);
+  zip_source_t* src = zip_source_buffer(z, bytes.data(), bytes.size(), 0);
+  ASSERT_GE(zip_file_add(z, ("tv015_pv060/" + name).c_str(), src, ZIP_FL_ENC_UTF_8), 0);
+  ASSERT_EQ(zip_set_file_compression(z, 0, ZIP_CM_DEFLATE, 9), 0);
+  ASSERT_EQ(zip_close(z), 0);
+  ConvertOptions o;
+  o.layout = "ubo2003";
+  o.allow_missing = true;
+  ImportImageSet(o, dir / "ubo", dir / "folder.h5");
+  ImportImageSet(o, dir / "ubo.zip", dir / "zip.h5");
+  const Dataset a = ReadDataset(dir / "folder.h5"), b = ReadDataset(dir / "zip.h5");
+  const auto ia = a.image(2, 1), ib = b.image(2, 1);
+  EXPECT_TRUE(std::equal(ia.begin(), ia.end(), ib.begin(), ib.end()));
+  for (float x : b.image(2, 1)) ASSERT_NEAR(x, SrgbToLinear(120.0f / 255.0f), 1e-6);
+}
+
+// ubo2014-images: UBO2014 Dome 1 directions, NNNNN = 151 light + view, angles with decimals and
+// matched within 0.5 degrees (Bonn stores them to about 0.5 degrees).
+TEST(ImageSet, Ubo2014ImagesUseTheDome1Sampling) {
+  const auto dir = test::TempDir();
+  std::filesystem::create_directories(dir / "set");
+  // Dome 1: index 0 the pole, 1-6 theta 11 (phi 15 + 60 k), 7-18 theta 23.5 (phi 30 k). Light 8 =
+  // (23.5, 30), view 2 = (11, 75); the file's angles are off by 0.3 degrees.
+  WriteImage(dir / "set" / "01210 tl23.8 pl30.2 tv11 pv75.exr", KnownImage(2, 8));
+  ConvertOptions o;
+  o.layout = "ubo2014-images";
+  o.allow_missing = true;
+  const ConvertSummary s = ImportImageSet(o, dir / "set", dir / "out.h5");
+  EXPECT_EQ(s.missing_images, 151u * 151u - 1u);
+  const Dataset d = ReadDataset(dir / "out.h5");
+  EXPECT_EQ(d.views().name(), Sampling::Ubo151().name());
+  for (int y = 0; y < 3; ++y)
+    for (int x = 0; x < 4; ++x)
+      for (int c = 0; c < 3; ++c) ASSERT_EQ(d.image(2, 8)[(std::size_t(y) * 4 + x) * 3 + c], Known(2, 8, y, x, c));
+  // Without --allow-missing the first missing names are given in this layout's naming; a number
+  // that disagrees with 151 light + view is refused.
+  o.allow_missing = false;
+  std::string e = test::ErrorOf([&] { ImportImageSet(o, dir / "set", dir / "o.h5"); });
+  EXPECT_NE(e.find("22800 of 22801 images are missing ('00000 tl0 pl0 tv0 pv0.*'"), std::string::npos) << e;
+  WriteImage(dir / "set" / "00081 tl11 pl15 tv0 pv0.exr", KnownImage(0, 1));  // light 1 view 0: 151, not 81
+  o.allow_missing = true;
+  e = test::ErrorOf([&] { ImportImageSet(o, dir / "set", dir / "o.h5"); });
+  EXPECT_NE(e.find("image number 81 disagrees with its directions (light 1, view 0: 151 x light + view = 151)"),
+            std::string::npos)
+      << e;
 }
 
 }  // namespace

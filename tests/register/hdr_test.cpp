@@ -152,14 +152,15 @@ TEST(HdrMerge, ResponseCurveRecoveredWithinTwoPercent) {
 }
 
 TEST(HdrMerge, BadBracketsNameTheFilesAndWhatToDo) {
-  // All exposures clipped: 2, 4 and 8 x the auto exposure clip the brightest texels in all three.
+  // All exposures clipped on the whole sample: 2, 4 and 8 x the auto exposure clip every texel
+  // (texels clipped in every exposure are masked; a photo with nothing left fails).
   const auto dir = Synth(test::TempDir(), "--format png16 --brackets 2,4,8", "clipped");
   const std::string run = test::Tool("btf-register") + " run --quiet " + (dir / "manifest.json").string() +
                           " --resolution 16 -o " + (dir / "d.h5").string() + " 2>&1";
   std::string out;
   EXPECT_EQ(test::RunCommand(run, &out), 3) << out;
-  EXPECT_NE(out.find("clipped in every exposure of the bracket ('v000_l000_e0.png', 'v000_l000_e1.png', "
-                     "'v000_l000_e2.png'"),
+  EXPECT_NE(out.find("every texel of the sample is masked (0 hidden behind raised markers, 256 clipped in every "
+                     "exposure of the bracket ('v000_l000_e0.png', 'v000_l000_e1.png', 'v000_l000_e2.png'"),
             std::string::npos)
       << out;
   EXPECT_NE(out.find("add a shorter exposure"), std::string::npos) << out;

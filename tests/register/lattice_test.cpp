@@ -128,6 +128,43 @@ TEST(Lattice, TrimmedTileAverageSuppressesNoiseAndOutlierTiles) {
   EXPECT_GT(e0, 3 * e1);
 }
 
+TEST(Lattice, MaskedTexelsAreLeftOutOfTheTileAverage) {
+  // A clean periodic image with a strip of "marker print" (value 5) along one edge, as a raised
+  // marker hides at grazing views. Masked, the strip leaves the plain mean (no trimming) equal to
+  // the clean image's average up to float rounding; unmasked, it biases every sample it covers.
+  const Vec2 a1(10.6, 0), a2(0, 12.2);
+  const int n = 200;
+  const Image clean = PeriodicImage(n, a1, a2, 0, 0);
+  Image stained = clean;
+  std::vector<std::uint8_t> mask(std::size_t(n) * n, 0);
+  for (int y = n - 12; y < n; ++y)
+    for (int x = 0; x < n; ++x) stained.at(x, y, 0) = 5, mask[std::size_t(y) * n + x] = 1;
+  Lattice L;
+  L.a1 = a1;
+  L.a2 = a2;
+  TileAverageOptions mean;
+  mean.trim_fraction = 0;
+  const AveragedTile ref = AverageTiles(clean, L, mean);
+  // Leaving samples out changes which tiles enter each sample's mean: the clean image's tiles
+  // differ by its illumination gradient (0.002 per texel), so compare against the clean average
+  // over the same tiles, i.e. the clean image with the same mask.
+  const AveragedTile ref_masked = AverageTiles(clean, L, mean, &mask);
+  const AveragedTile with = AverageTiles(stained, L, mean, &mask), without = AverageTiles(stained, L, mean);
+  EXPECT_EQ(with.samples_without_valid_tile, 0);
+  double e_with = 0, e_without = 0;
+  for (std::size_t i = 0; i < ref.tile.pixels.size(); ++i) {
+    e_with = std::max<double>(e_with, std::abs(with.tile.pixels[i] - ref_masked.tile.pixels[i]));
+    e_without = std::max<double>(e_without, std::abs(without.tile.pixels[i] - ref.tile.pixels[i]));
+  }
+  EXPECT_EQ(e_with, 0.0);       // the same samples, summed in the same order
+  EXPECT_GT(e_without, 0.1);    // the strip (1 of ~15 tile rows) shifts the mean by about 5/15
+  // A mask over everything: each sample falls back to all tiles (counted), as without a mask.
+  std::vector<std::uint8_t> all(mask.size(), 1);
+  const AveragedTile fallback = AverageTiles(stained, L, mean, &all);
+  EXPECT_EQ(fallback.samples_without_valid_tile, fallback.tile.width * fallback.tile.height);
+  EXPECT_EQ(fallback.tile.pixels, without.tile.pixels);
+}
+
 TEST(Lattice, NonPeriodicAndStripedImagesAreRejected) {
   const int n = 128;
   std::mt19937 rng(3);

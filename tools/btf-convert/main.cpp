@@ -63,7 +63,7 @@ int main(int argc, char** argv) {
   btf::cli::CommonFlags common;
   ConvertFlags f;
   btf::ConvertOptions& o = f.options;
-  app.add_option("INPUT", f.input, "Input: dataset (.h5), codec (.h5) or Bonn .btf file; a folder with --layout")->required();
+  app.add_option("INPUT", f.input, "Input: dataset (.h5), codec (.h5) or Bonn .btf file; with --layout a folder or zip archive of images")->required();
   app.add_option("-o,--output", f.output, "Output file (.h5 = dataset, .btf = BDI unless --to)")->required();
   app.add_option("--to", o.to,
                  "Output format: dataset | bdi | fmf | dfmf | pvf (pvf from a pca-view codec; default: from the output's "
@@ -72,10 +72,11 @@ int main(int argc, char** argv) {
   app.add_option("--deflate-level", o.deflate_level, "Dataset output: deflate level 0-9 (0 = none)");
   app.add_option("--scan-lines", o.scan_lines_per_chunk, "BDI output: texture rows per chunk");
   app.add_option("--layout", o.layout,
-                 "INPUT is a folder of images: ubo2003 (NNNNN tlTTT plPPP tvTTT pvPPP.jpg, sRGB), atrium (the same "
-                 "names, .hdr) or pattern (--pattern); the output is a dataset");
+                 "INPUT is a folder or zip of images: ubo2003 (NNNNN tlTTT plPPP tvTTT pvPPP.jpg, sRGB), atrium (the "
+                 "same names, .hdr), ubo2014-images (UBO2014 Dome 1: NNNNN tlT plP tvT pvP.exr|hdr|png|jpg|tif, "
+                 "NNNNN = 151 light + view) or pattern (--pattern); the output is a dataset");
   app.add_option("--pattern", o.pattern,
-                 "--layout pattern: image path relative to the folder with fields {tv} {pv} {tl} {pl} (degrees), e.g. "
+                 "--layout pattern: image path relative to the folder (or zip) with fields {tv} {pv} {tl} {pl} (degrees), e.g. "
                  "'tv{tv}_pv{pv}/tl{tl}_pl{pl}.exr'");
   app.add_flag("--allow-missing", o.allow_missing, "Image sets: write missing (view, light) images as 0 instead of failing");
   app.add_option("--components,-c", f.fmf.components,
