@@ -58,8 +58,8 @@ struct Hit {
   Vec2 uv;
 };
 
-const Vec3 kCamera(0, -3.2, 2.6);
-constexpr double kFovY = DegToRad(32);
+const Vec3 kCamera = RenderCamera{}.position;
+const double kFovY = DegToRad(RenderCamera{}.fov_y_deg);
 
 bool Intersect(const RenderOptions& o, const Vec3& origin, const Vec3& dir, Hit* hit) {
   if (o.scene == "patch") {
@@ -76,7 +76,7 @@ bool Intersect(const RenderOptions& o, const Vec3& origin, const Vec3& dir, Hit*
     return true;
   }
   // Cylinder along the x axis, radius R: u runs along the axis, v around it (cloth draped over a bar).
-  constexpr double R = 0.6;
+  constexpr double R = kCylinderRadius;
   const double a = dir.y() * dir.y() + dir.z() * dir.z();
   const double b = 2 * (origin.y() * dir.y() + origin.z() * dir.z());
   const double c = origin.y() * origin.y() + origin.z() * origin.z() - R * R;
@@ -170,6 +170,22 @@ void EnvironmentRadiance(const std::string& environment, const Vec3& d, double* 
   for (int k = 0; k < 3; ++k) rgb[k] = horizon[k] + (zenith[k] - horizon[k]) * t + sun;
 }
 
+std::vector<EnvironmentSample> EnvironmentSamples(const RenderOptions& o) {
+  // Fibonacci sphere, equal solid angle each.
+  std::vector<EnvironmentSample> samples;
+  const double golden = kPi * (3 - std::sqrt(5.0)), d_omega = 4 * kPi / std::max(1, o.environment_samples);
+  for (int i = 0; i < o.environment_samples; ++i) {
+    const double z = 1 - (2 * i + 1.0) / o.environment_samples;
+    const double r = std::sqrt(std::max(0.0, 1 - z * z));
+    EnvironmentSample e;
+    e.direction = Vec3(r * std::cos(golden * i), r * std::sin(golden * i), z);
+    EnvironmentRadiance(o.environment, e.direction, e.radiance_solid_angle);
+    for (double& v : e.radiance_solid_angle) v *= d_omega;
+    samples.push_back(e);
+  }
+  return samples;
+}
+
 SurfacePoint TracePixel(const RenderOptions& o, int px, int py) {
   o.Check();
   SurfacePoint sp;
@@ -183,22 +199,7 @@ SurfacePoint TracePixel(const RenderOptions& o, int px, int py) {
 
 Image Render(const BtfEvaluator& btf, const RenderOptions& o) {
   o.Check();
-  // Fixed environment sample set: Fibonacci sphere, equal solid angle each.
-  std::vector<Vec3> env_dirs;
-  std::vector<std::array<double, 3>> env_rad;
-  if (o.lighting == "environment") {
-    const double golden = kPi * (3 - std::sqrt(5.0));
-    for (int i = 0; i < o.environment_samples; ++i) {
-      const double z = 1 - (2 * i + 1.0) / o.environment_samples;
-      const double r = std::sqrt(std::max(0.0, 1 - z * z));
-      const Vec3 d(r * std::cos(golden * i), r * std::sin(golden * i), z);
-      std::array<double, 3> rad{};
-      EnvironmentRadiance(o.environment, d, rad.data());
-      env_dirs.push_back(d);
-      env_rad.push_back(rad);
-    }
-  }
-  const double d_omega = 4 * kPi / std::max(1, o.environment_samples);
+  const std::vector<EnvironmentSample> env = o.lighting == "environment" ? EnvironmentSamples(o) : std::vector<EnvironmentSample>{};
   const Camera camera(o);
   const int C = btf.channels();
   Image img(o.width, o.height, 3);
@@ -224,7 +225,7 @@ Image Render(const BtfEvaluator& btf, const RenderOptions& o) {
           const double radiance[3] = {o.light_intensity, o.light_intensity, o.light_intensity};
           if (r2 > 1e-12) add(ToLocal(h, to_light / std::sqrt(r2)), radiance, 1.0 / r2);
         } else {
-          for (std::size_t j = 0; j < env_dirs.size(); ++j) add(ToLocal(h, env_dirs[j]), env_rad[j].data(), d_omega);
+          for (const EnvironmentSample& e : env) add(ToLocal(h, e.direction), e.radiance_solid_angle, 1.0);
         }
       }
       for (int k = 0; k < 3; ++k) img.at(px, py, k) = float(L[k]);

@@ -4,6 +4,7 @@
 // environment is integrated over a fixed set of sampled directions, without visibility).
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "libbtf/compress/codec.h"
 #include "libbtf/core/dataset.h"
@@ -47,6 +48,22 @@ struct RenderOptions {
   double background = 0.02;         // radiance of pixels that miss the object
   void Check() const;
 };
+
+// The fixed camera of every scene (world: z up): position, the point it looks at, its up vector
+// and vertical field of view; the cylinder's radius. A browser renderer uses the same numbers.
+struct RenderCamera {
+  Vec3 position{0, -3.2, 2.6}, target{0, 0, 0}, up{0, 0, 1};
+  double fov_y_deg = 32;
+};
+inline constexpr double kCylinderRadius = 0.6;
+
+// The environment's fixed sample set: Fibonacci-sphere directions (world) and radiance (linear
+// RGB) times the solid angle 4 pi / N of each; Render sums BTF * cos * this over the samples.
+struct EnvironmentSample {
+  Vec3 direction;
+  double radiance_solid_angle[3];
+};
+std::vector<EnvironmentSample> EnvironmentSamples(const RenderOptions& options);
 
 // What pixel (px, py) sees: the surface point, its frame and texture coordinates (for tests).
 struct SurfacePoint {

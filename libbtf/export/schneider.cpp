@@ -5,6 +5,7 @@
 
 #include "libbtf/core/atomic_file.h"
 #include "libbtf/core/error.h"
+#include "libbtf/export/half.h"
 
 namespace btf {
 
@@ -22,6 +23,11 @@ void SchneiderExportOptions::Check() const {
   BTF_CHECK_OPTION(view_grid >= 2 && view_grid <= 256, "view_grid", "must be 2..256");
   BTF_CHECK_OPTION(light_grid >= 2 && light_grid <= 256, "light_grid", "must be 2..256");
   BTF_CHECK_OPTION(components >= -1, "components", "must be >= 0, or -1 for all");
+  BTF_CHECK_OPTION(storage == "u8" || storage == "f16", "storage", "must be u8 or f16");
+  BTF_CHECK_OPTION(atlas_side >= 16 && atlas_side <= 16384, "atlas_side", "must be 16..16384");
+  BTF_CHECK_OPTION(view_grid <= atlas_side, "view_grid", "must be <= atlas_side (one tile per function)");
+  BTF_CHECK_OPTION(light_grid * light_grid <= atlas_side, "light_grid",
+                   "light_grid^2 (the atlas depth) must be <= atlas_side (16 for 256)");
 }
 
 nlohmann::json SchneiderExportSummary::ToJson() const {
@@ -30,6 +36,9 @@ nlohmann::json SchneiderExportSummary::ToJson() const {
           {"functions_per_cluster", functions},
           {"view_grid", view_grid},
           {"light_grid", light_grid},
+          {"storage", storage},
+          {"atlas", {{"width", atlas_width}, {"height", atlas_height}, {"depth", atlas_depth}, {"pages", atlas_pages},
+                     {"tiles_x", tiles_x}, {"tiles_y", tiles_y}}},
           {"texture_bytes", texture_bytes},
           {"weight_bytes", weight_bytes},
           {"index_bytes", index_bytes},
@@ -39,8 +48,10 @@ nlohmann::json SchneiderExportSummary::ToJson() const {
 }
 
 std::string SchneiderExportSummary::Report() const {
-  return fmt::format("{}/ : {} clusters x {} functions on a {}^2 x {}^2 grid; textures {}, weights {}, index {}; {}\n",
-                     directory, clusters, functions, view_grid, light_grid, FormatBytes(texture_bytes),
+  return fmt::format("{}/ : {} clusters x {} functions on a {}^2 x {}^2 grid, {} atlas {} x {} x {} x {} page(s); "
+                     "textures {}, weights {}, index {}; {}\n",
+                     directory, clusters, functions, view_grid, light_grid, storage, atlas_width, atlas_height,
+                     atlas_depth, atlas_pages, FormatBytes(texture_bytes),
                      FormatBytes(weight_bytes), FormatBytes(index_bytes), times.Report());
 }
 
@@ -75,8 +86,17 @@ SchneiderExportSummary ExportSchneider(const SchneiderExportOptions& o, const Co
       light_ip[std::size_t(t) * nl + sl] =
           codec.lights().Barycentric(HemisphereFromSquare(Vec2(GridCoordinate(sl, nl), GridCoordinate(t, nl))));
 
-  std::vector<std::uint8_t> tex(std::size_t(K) * F * grid * C);
-  std::vector<float> scales(std::size_t(K) * F, 0.0f);
+  // Atlas: function g = k * F + f is tile (g % tiles_x, (g / tiles_x) % tiles_y) of page g / per_page.
+  const int G = K * F;
+  const int tiles_x = std::min(G, o.atlas_side / nv);
+  const int tiles_y = std::min((G + tiles_x - 1) / tiles_x, o.atlas_side / nv);
+  const int per_page = tiles_x * tiles_y, pages = (G + per_page - 1) / per_page;
+  const int AW = tiles_x * nv, AH = tiles_y * nv, AD = nl * nl;
+  const std::size_t atlas_values = std::size_t(pages) * AD * AH * AW * C;
+  const bool half = o.storage == "f16";
+  std::vector<std::uint8_t> tex8(half ? 0 : atlas_values);
+  std::vector<std::uint16_t> tex16(half ? atlas_values : 0);
+  std::vector<float> scale_bias(std::size_t(G) * 2, 0.0f);
   double max_q = 0;
   for (int k = 0; k < K; ++k) {
     rep.Progress(std::size_t(k), std::size_t(K), "resample");
@@ -99,36 +119,58 @@ SchneiderExportSummary ExportSchneider(const SchneiderExportOptions& o, const Co
             }
           }
       }
-      double scale = 0;
-      for (double v : vals) scale = std::max(scale, std::abs(v));
-      scales[std::size_t(k) * F + f] = static_cast<float>(scale);
-      const float sc = scales[std::size_t(k) * F + f];
-      std::uint8_t* out = &tex[(std::size_t(k) * F + f) * grid * C];
-      for (std::size_t i = 0; i < vals.size(); ++i) {
-        // Signed normalized 8 bits: q in 0..255 stands for q / 127.5 - 1 in [-1, 1].
-        const double u = sc > 0 ? vals[i] / sc : 0.0;
-        const long q = std::lround((u + 1.0) * 127.5);
-        out[i] = static_cast<std::uint8_t>(std::clamp(q, 0L, 255L));
-        max_q = std::max(max_q, std::abs((out[i] / 127.5 - 1.0) - u));
-      }
+      // Scale and bias: t = (value - bias) / scale spans [0, 1] exactly (all 256 codes in use).
+      double lo = vals.empty() ? 0 : vals[0], hi = lo;
+      for (double v : vals) lo = std::min(lo, v), hi = std::max(hi, v);
+      const int g = k * F + f;
+      const float bias = static_cast<float>(lo), scale = static_cast<float>(hi - lo);
+      scale_bias[std::size_t(g) * 2] = scale;
+      scale_bias[std::size_t(g) * 2 + 1] = bias;
+      const int page = g / per_page, tx = g % tiles_x, ty = (g / tiles_x) % tiles_y;
+      for (int z = 0; z < AD; ++z)
+        for (int tv = 0; tv < nv; ++tv)
+          for (int sv = 0; sv < nv; ++sv)
+            for (int ch = 0; ch < C; ++ch) {
+              const double v = vals[((std::size_t(z) * nv + tv) * nv + sv) * C + ch];
+              const double t = scale > 0 ? std::clamp((v - bias) / double(scale), 0.0, 1.0) : 0.0;
+              const std::size_t at =
+                  (((std::size_t(page) * AD + z) * AH + std::size_t(ty) * nv + tv) * AW + std::size_t(tx) * nv + sv) * C + ch;
+              double stored;
+              if (half) {
+                tex16[at] = FloatToHalf(static_cast<float>(t));
+                stored = HalfToFloat(tex16[at]);
+              } else {
+                tex8[at] = static_cast<std::uint8_t>(std::clamp(std::lround(t * 255.0), 0L, 255L));
+                stored = tex8[at] / 255.0;
+              }
+              max_q = std::max(max_q, std::abs(stored - t));
+            }
     }
   }
   s.times.Add("resample", timer.Seconds());
   timer.Restart();
-  std::vector<float> weights(T * F);
+  // Terms per texel: offset = sum_f w_f bias_f, then w_f scale_f (w_0 = 1 for the mean).
+  const int NT = 1 + F;
+  std::vector<float> terms(T * NT);
   std::vector<std::uint16_t> index(T);
   for (std::size_t t = 0; t < T; ++t) {
     const int k = m.cluster_of[t];
     index[t] = static_cast<std::uint16_t>(k);
-    weights[t * F] = scales[std::size_t(k) * F];
-    for (int j = 0; j < c; ++j)
-      weights[t * F + 1 + j] = (j < m.cluster_components[static_cast<std::size_t>(k)] ? m.weights[t * m.components + j] : 0.0f) *
-                               scales[std::size_t(k) * F + 1 + j];
+    double offset = 0;
+    for (int f = 0; f < F; ++f) {
+      const double w = f == 0 ? 1.0
+                              : (f - 1 < m.cluster_components[static_cast<std::size_t>(k)] ? m.weights[t * m.components + f - 1] : 0.0f);
+      const std::size_t g = std::size_t(k) * F + f;
+      offset += w * scale_bias[g * 2 + 1];
+      terms[t * NT + 1 + f] = static_cast<float>(w * scale_bias[g * 2]);
+    }
+    terms[t * NT] = static_cast<float>(offset);
   }
-  s.texture_bytes = WriteBinary(dir / "eigen_abrdfs.u8", tex);
-  s.weight_bytes = WriteBinary(dir / "weights.f32", weights);
+  const std::string atlas_file = half ? "atlas.f16" : "atlas.u8";
+  s.texture_bytes = half ? WriteBinary(dir / atlas_file, tex16) : WriteBinary(dir / atlas_file, tex8);
+  s.weight_bytes = WriteBinary(dir / "terms.f32", terms);
   s.index_bytes = WriteBinary(dir / "cluster_index.u16", index);
-  WriteBinary(dir / "scales.f32", scales);
+  WriteBinary(dir / "scale_bias.f32", scale_bias);
 
   nlohmann::json j;
   j["format"] = kSchneiderExportFormat;
@@ -147,29 +189,44 @@ SchneiderExportSummary ExportSchneider(const SchneiderExportOptions& o, const Co
       {"view", "(s_v, t_v) = square coordinates of the view direction wo"},
       {"light", "(s_l, t_l) = square coordinates of the light direction wi"},
       {"grid", "sample i of n on an axis sits at the cell centre (i + 0.5) / n"}};
-  j["eigen_abrdfs"] = {
-      {"file", "eigen_abrdfs.u8"},
-      {"type", "uint8"},
-      {"shape", {K, F, nl * nl, nv, nv, C}},
-      {"dimension_names", {"cluster", "function", "z", "t_v", "s_v", "channel"}},
-      {"functions", "function 0 = cluster mean, 1..c = Eigen-ABRDFs"},
-      {"view_grid", nv},
-      {"light_grid", nl},
-      {"z_layout", "z = i * n_sl + j for slab i (t_l sample i) and s_l sample j: 3D texture of depth n_tl * n_sl"},
-      {"decode_value", "q / 127.5 - 1 (signed normalised); the scale is folded into the weights"},
+  j["functions"] = {{"count_per_cluster", F}, {"meaning", "function 0 = cluster mean, 1..c = Eigen-ABRDFs"},
+                    {"view_grid", nv}, {"light_grid", nl},
+                    {"slab_layout", "depth z = i * n_sl + j for slab i (t_l sample i) and s_l sample j"}};
+  j["atlas"] = {
+      {"file", atlas_file},
+      {"type", half ? "float16" : "uint8"},
+      {"storage", o.storage},
+      {"webgl_format", half ? (C == 1 ? "R16F / RED / HALF_FLOAT" : "RGB16F / RGB / HALF_FLOAT")
+                            : (C == 1 ? "R8 / RED / UNSIGNED_BYTE" : "RGB8 / RGB / UNSIGNED_BYTE")},
+      {"shape", {pages, AD, AH, AW, C}},
+      {"dimension_names", {"page", "z", "y", "x", "channel"}},
+      {"width", AW}, {"height", AH}, {"depth", AD}, {"pages", pages},
+      {"tiles_x", tiles_x}, {"tiles_y", tiles_y}, {"tile_width", nv}, {"tile_height", nv},
+      {"max_side", o.atlas_side},
+      {"tile_of_function",
+       "g = cluster * F + f; page = g / (tiles_x * tiles_y), tile column = g % tiles_x, tile row = (g / tiles_x) % tiles_y"},
+      {"decode_value", half ? "t = the half float as stored, in [0, 1]" : "t = q / 255 (unsigned normalised), in [0, 1]"},
       {"lookup",
        "slab coordinate a = t_l * n_tl - 0.5: a <= 0 -> slab 0 only, a >= n_tl - 1 -> the last slab only, else "
-       "i0 = floor(a), i1 = i0 + 1, w = a - i0; in each slab s_l is clamped half a texel inside "
-       "[0.5 / n_sl, 1 - 0.5 / n_sl] so filtering never mixes neighbouring slabs; normalised 3D coordinates "
-       "(s_v, t_v, (i + s_l_clamped) / n_tl) with trilinear filtering, clamp to edge; value = (1 - w) S_i0 + w S_i1"}};
-  j["weights"] = {{"file", "weights.f32"}, {"type", "float32"}, {"shape", {codec.height(), codec.width(), F}},
-                  {"meaning", "value = sum_f weights[y][x][f] * decode(eigen_abrdfs[cluster_index[y][x]][f] at (wo, wi))"}};
+       "i0 = floor(a), i1 = i0 + 1, w = a - i0; in each slab, with texel coordinates (centre of texel n at n + 0.5): "
+       "x = tile column * n_sv + clamp(s_v * n_sv - 0.5, 0, n_sv - 1) + 0.5, y = tile row * n_tv + clamp(t_v * n_tv - 0.5, "
+       "0, n_tv - 1) + 0.5, z = i * n_sl + clamp(s_l * n_sl - 0.5, 0, n_sl - 1) + 0.5 (the clamps keep filtering inside "
+       "one tile and one slab), trilinear filtering of the page at (x / width, y / height, z / depth); "
+       "t_f = (1 - w) S_i0 + w S_i1"}};
+  j["terms"] = {{"file", "terms.f32"}, {"type", "float32"}, {"shape", {codec.height(), codec.width(), NT}},
+                {"meaning", "value = terms[y][x][0] + sum_f terms[y][x][1 + f] * t_f(cluster_index[y][x], wo, wi); "
+                            "term 0 = sum_f w_f bias_f, term 1 + f = w_f scale_f (w_0 = 1)"}};
   j["cluster_index"] = {{"file", "cluster_index.u16"}, {"type", "uint16"}, {"shape", {codec.height(), codec.width()}}};
-  j["scales"] = {{"file", "scales.f32"}, {"type", "float32"}, {"shape", {K, F}},
-                 {"meaning", "max |function| over the grid; already multiplied into weights"}};
-  j["quantisation_error_bound"] =
-      "per value: sum_f |weights[f]| / 255 (half a step of 2/255 in each function's [-1, 1] range)";
+  j["scale_bias"] = {{"file", "scale_bias.f32"}, {"type", "float32"}, {"shape", {K, F, 2}},
+                     {"meaning", "function value = bias + scale * t, t in [0, 1] (min and max over the grid); "
+                                 "already folded into terms"}};
+  j["quantisation_error_bound"] = {
+      {"per_t", StorageQuantizationBound(o.storage)},
+      {"per_value", fmt::format("sum_f |terms[1 + f]| * {} ({})", StorageQuantizationBound(o.storage),
+                                half ? "half an ulp of a half float below 1, 2^-12, plus 2^-24 for the float32 rounding before it" : "half a step of 1/255")}};
+  j["glsl"] = {{"file", "btf_schneider.glsl"}, {"function", "vec3 btf_eval(vec2 uv, vec3 wi, vec3 wo)"}};
   j["byte_order"] = "little-endian";
+  WriteTextFileAtomic(dir / "btf_schneider.glsl", SchneiderGlsl(j));
   WriteTextFileAtomic(dir / "manifest.json", j.dump(2) + "\n");
   output.Commit();
   s.times.Add("write", timer.Seconds());
@@ -181,6 +238,9 @@ SchneiderExportSummary ExportSchneider(const SchneiderExportOptions& o, const Co
   s.height = codec.height();
   s.width = codec.width();
   s.channels = C;
+  s.storage = o.storage;
+  s.atlas_width = AW, s.atlas_height = AH, s.atlas_depth = AD, s.atlas_pages = pages;
+  s.tiles_x = tiles_x, s.tiles_y = tiles_y;
   s.max_quantization_error = max_q;
   rep.Progress(std::size_t(K), std::size_t(K), "resample");
   return s;

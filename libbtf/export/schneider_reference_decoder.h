@@ -1,8 +1,9 @@
 #pragma once
-// Header-only reference decoder of the Schneider export (libbtf/export/schneider.h): reads the
-// folder through manifest.json and evaluates a value the way a GPU shader would (trilinear 3D
-// texture fetches in two t_l slabs, lerped). It needs only the manifest, the binary files and the
-// elevated concentric map (libbtf/core/directions.h); tests check it against Codec::Value.
+// Header-only reference decoder of the Schneider export (libbtf/export/schneider.h, format 2.x):
+// reads the folder through manifest.json and evaluates a value the way a GPU shader would
+// (trilinear fetches from the 3D texture atlas in two t_l slabs, lerped; btf_schneider.glsl is the
+// same in GLSL). It needs only the manifest, the binary files and the elevated concentric map
+// (libbtf/core/directions.h); tests check it against Codec::Value and against the GLSL in a browser.
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -15,6 +16,7 @@
 
 #include "libbtf/core/directions.h"
 #include "libbtf/core/error.h"
+#include "libbtf/export/half.h"
 
 namespace btf {
 
@@ -26,21 +28,44 @@ class SchneiderReferenceDecoder {
     const nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
     if (j.is_discarded() || j.value("format", "") != "libbtf-schneider-export")
       ThrowBadInput("'{}' is not a libbtf Schneider export manifest", (dir / "manifest.json").string());
-    if (j.value("format_version", "").rfind("1.", 0) != 0)
-      ThrowBadInput("'{}': unsupported export version '{}'", (dir / "manifest.json").string(),
+    if (j.value("format_version", "").rfind("2.", 0) != 0)
+      ThrowBadInput("'{}': unsupported export version '{}' (this decoder reads 2.x)", (dir / "manifest.json").string(),
                     j.value("format_version", ""));
-    const auto shape = j.at("eigen_abrdfs").at("shape");
-    clusters_ = shape[0];
-    functions_ = shape[1];
-    nv_ = j.at("eigen_abrdfs").at("view_grid");
-    nl_ = j.at("eigen_abrdfs").at("light_grid");
-    channels_ = shape[5];
+    const auto& fn = j.at("functions");
+    const auto& atlas = j.at("atlas");
+    clusters_ = j.at("scale_bias").at("shape")[0];
+    functions_ = fn.at("count_per_cluster");
+    nv_ = fn.at("view_grid");
+    nl_ = fn.at("light_grid");
+    channels_ = j.at("texture").at("channels");
+    const auto& cos_included = j.at("values").at("cos_theta_i_included");
+    cos_theta_i_included_ = cos_included.is_boolean() ? cos_included.get<bool>() : cos_included.get<int>() != 0;
     height_ = j.at("texture").at("height");
     width_ = j.at("texture").at("width");
-    tex_ = Load<std::uint8_t>(dir / j.at("eigen_abrdfs").at("file").get<std::string>(),
-                              std::size_t(clusters_) * functions_ * nl_ * nl_ * nv_ * nv_ * channels_);
-    weights_ = Load<float>(dir / j.at("weights").at("file").get<std::string>(),
-                           std::size_t(height_) * width_ * functions_);
+    aw_ = atlas.at("width");
+    ah_ = atlas.at("height");
+    ad_ = atlas.at("depth");
+    pages_ = atlas.at("pages");
+    tiles_x_ = atlas.at("tiles_x");
+    tiles_y_ = atlas.at("tiles_y");
+    if (ad_ != nl_ * nl_ || aw_ != tiles_x_ * nv_ || ah_ != tiles_y_ * nv_ ||
+        pages_ * tiles_x_ * tiles_y_ < clusters_ * functions_)
+      ThrowBadInput("'{}': atlas shape does not fit the grids and function count", dir.string());
+    const std::size_t n = std::size_t(pages_) * ad_ * ah_ * aw_ * channels_;
+    const std::string storage = atlas.at("storage");
+    quantization_bound_ = j.at("quantisation_error_bound").at("per_t");
+    if (storage == "u8") {
+      const auto q = Load<std::uint8_t>(dir / atlas.at("file").get<std::string>(), n);
+      tex_.resize(n);
+      for (std::size_t i = 0; i < n; ++i) tex_[i] = q[i] / 255.0f;
+    } else if (storage == "f16") {
+      const auto q = Load<std::uint16_t>(dir / atlas.at("file").get<std::string>(), n);
+      tex_.resize(n);
+      for (std::size_t i = 0; i < n; ++i) tex_[i] = HalfToFloat(q[i]);
+    } else {
+      ThrowBadInput("'{}': unknown atlas storage '{}'", dir.string(), storage);
+    }
+    terms_ = Load<float>(dir / j.at("terms").at("file").get<std::string>(), std::size_t(height_) * width_ * (1 + functions_));
     index_ = Load<std::uint16_t>(dir / j.at("cluster_index").at("file").get<std::string>(), std::size_t(height_) * width_);
     for (auto k : index_)
       if (k >= clusters_) ThrowBadInput("'{}': cluster index {} >= {}", dir.string(), k, clusters_);
@@ -50,7 +75,17 @@ class SchneiderReferenceDecoder {
   int width() const { return width_; }
   int channels() const { return channels_; }
   int functions() const { return functions_; }
-  const float* weights(int y, int x) const { return &weights_[(std::size_t(y) * width_ + x) * functions_]; }
+  bool cos_theta_i_included() const { return cos_theta_i_included_; }
+  // Terms of texel (x, y): [0] = offset, [1 + f] = weight of function f (scale folded in).
+  const float* terms(int y, int x) const { return &terms_[(std::size_t(y) * width_ + x) * (1 + functions_)]; }
+  // Largest |stored - exact| of a normalised function value t (manifest quantisation_error_bound.per_t).
+  double quantization_bound() const { return quantization_bound_; }
+  // Bound on |Value - exact resampled value| at grid nodes: sum_f |terms[1 + f]| * per_t.
+  double ErrorBound(int x, int y) const {
+    double b = 0;
+    for (int f = 0; f < functions_; ++f) b += std::abs(terms(y, x)[1 + f]) * quantization_bound_;
+    return b;
+  }
 
   // Value at texel (x, y) (nearest-texel lookup, as the renderer's cluster index must be) for
   // light wi and view wo: out has channels() floats.
@@ -70,12 +105,14 @@ class SchneiderReferenceDecoder {
       i0 = static_cast<int>(std::floor(a)), i1 = i0 + 1, w = a - i0;
     }
     const double sl = std::clamp(l.x() * nl_ - 0.5, 0.0, double(nl_ - 1));
-    std::vector<double> acc(static_cast<std::size_t>(channels_), 0.0);
+    const float* tm = &terms_[t * (1 + functions_)];
+    std::vector<double> acc(static_cast<std::size_t>(channels_), double(tm[0]));
     for (int f = 0; f < functions_; ++f) {
-      const double wt = weights_[t * functions_ + f];
+      const double wt = tm[1 + f];
       if (wt == 0) continue;
+      const int g = k * functions_ + f;
       for (int ch = 0; ch < channels_; ++ch) {
-        const double s0 = Fetch(k, f, i0, v, sl, ch), s1 = i1 == i0 ? s0 : Fetch(k, f, i1, v, sl, ch);
+        const double s0 = Fetch(g, i0, v, sl, ch), s1 = i1 == i0 ? s0 : Fetch(g, i1, v, sl, ch);
         acc[static_cast<std::size_t>(ch)] += wt * ((1 - w) * s0 + w * s1);
       }
     }
@@ -93,14 +130,15 @@ class SchneiderReferenceDecoder {
       ThrowBadInput("'{}' does not hold exactly {} values of {} bytes", path.string(), count, sizeof(T));
     return v;
   }
-  // Decoded (signed normalized) texel of function f of cluster k.
-  double Texel(int k, int f, int z, int tv, int sv, int ch) const {
+  // Normalised value t of texel (sv, tv, z) of function g (its tile in the atlas).
+  double Texel(int g, int z, int tv, int sv, int ch) const {
+    const int per_page = tiles_x_ * tiles_y_, page = g / per_page, tx = g % tiles_x_, ty = (g / tiles_x_) % tiles_y_;
     const std::size_t i =
-        ((((std::size_t(k) * functions_ + f) * nl_ * nl_ + z) * nv_ + tv) * nv_ + sv) * channels_ + ch;
-    return tex_[i] / 127.5 - 1.0;
+        (((std::size_t(page) * ad_ + z) * ah_ + std::size_t(ty) * nv_ + tv) * aw_ + std::size_t(tx) * nv_ + sv) * channels_ + ch;
+    return tex_[i];
   }
   // Trilinear fetch in slab `slab`: (s_v, t_v) bilinear with clamp to edge, s_l linear inside the slab.
-  double Fetch(int k, int f, int slab, const Vec2& v, double sl, int ch) const {
+  double Fetch(int g, int slab, const Vec2& v, double sl, int ch) const {
     const double fx = std::clamp(v.x() * nv_ - 0.5, 0.0, double(nv_ - 1)),
                  fy = std::clamp(v.y() * nv_ - 0.5, 0.0, double(nv_ - 1));
     const int x0 = static_cast<int>(fx), y0 = static_cast<int>(fy), z0 = static_cast<int>(sl);
@@ -112,14 +150,17 @@ class SchneiderReferenceDecoder {
         for (int dx = 0; dx < 2; ++dx) {
           const double wgt = (dx ? ax : 1 - ax) * (dy ? ay : 1 - ay) * (dz ? az : 1 - az);
           if (wgt == 0) continue;
-          r += wgt * Texel(k, f, slab * nl_ + (dz ? z1 : z0), dy ? y1 : y0, dx ? x1 : x0, ch);
+          r += wgt * Texel(g, slab * nl_ + (dz ? z1 : z0), dy ? y1 : y0, dx ? x1 : x0, ch);
         }
     return r;
   }
 
   int clusters_ = 0, functions_ = 0, nv_ = 0, nl_ = 0, channels_ = 0, height_ = 0, width_ = 0;
-  std::vector<std::uint8_t> tex_;
-  std::vector<float> weights_;
+  int aw_ = 0, ah_ = 0, ad_ = 0, pages_ = 0, tiles_x_ = 0, tiles_y_ = 0;
+  double quantization_bound_ = 0;
+  bool cos_theta_i_included_ = false;
+  std::vector<float> tex_;  // normalised values t, as a GPU samples them
+  std::vector<float> terms_;
   std::vector<std::uint16_t> index_;
 };
 

@@ -11,6 +11,7 @@
 
 #include "libbtf/compress/codec.h"
 #include "libbtf/io/dataset_io.h"
+#include "libbtf/io/image_io.h"
 #include "tests/codec_util.h"
 #include "tests/test_util.h"
 
@@ -177,6 +178,47 @@ TEST(BtfEvalCli, StabilityJson) {
   const auto j = nlohmann::json::parse(out);
   EXPECT_EQ(j["failed"], 0);
   EXPECT_EQ(j["passed"], 3);
+}
+
+// render (CPU) of a codec; the usage and bad-input errors of render, render-web and view, which
+// all come before any browser starts (so these run without Chromium).
+TEST(BtfEvalCli, RenderWritesAnSrgbPngAndTheSceneCommandsRefuseBadInput) {
+  const auto dir = test::TempDir();
+  const std::string tool = test::Tool("btf-eval");
+  CompressOptions o;
+  o.components = 2;
+  WriteCodec(dir / "c.h5", test::CompressDataset(test::MakeTestDataset(5, 5, 4, 4), o));
+  std::string out;
+  ASSERT_EQ(test::RunCommand(tool + " render " + Q(dir / "c.h5") + " -o " + Q(dir / "cpu.png") +
+                                 " --scene cylinder-env --size 40x30 --exposure 2 --json",
+                             &out),
+            0)
+      << out;
+  const auto j = nlohmann::json::parse(out);
+  EXPECT_EQ(j["source_kind"], "codec");
+  EXPECT_EQ(j["scene"], "cylinder-env");
+  EXPECT_EQ(j["exposure"], 2.0);
+  const Image img = ReadImage(dir / "cpu.png");
+  EXPECT_EQ(img.width, 40);
+  EXPECT_EQ(img.height, 30);
+  const auto run = [&](const std::string& args) { return test::RunCommand(tool + " " + args + " 2>&1", &out); };
+  EXPECT_EQ(run("render " + Q(dir / "c.h5") + " -o " + Q(dir / "x.png") + " --size 40by30"), 2) << out;
+  EXPECT_NE(out.find("WIDTHxHEIGHT"), std::string::npos) << out;
+  EXPECT_EQ(run("render " + Q(dir / "c.h5") + " -o " + Q(dir / "x.png") + " --scene teapot"), 2) << out;
+  EXPECT_EQ(run("render " + Q(dir / "c.h5") + " -o " + Q(dir / "x.png") + " --exposure 0"), 2) << out;
+  EXPECT_EQ(run("render " + Q(dir / "cpu.png") + " -o " + Q(dir / "x.png")), 3) << out;  // not a BTF file
+  EXPECT_FALSE(std::filesystem::exists(dir / "x.png"));
+  // render-web and view: a folder without manifest.json is bad input; a missing Chromium or node is usage.
+  std::filesystem::create_directories(dir / "not_export");
+  EXPECT_EQ(run("render-web " + Q(dir / "not_export") + " -o " + Q(dir / "x.png")), 3) << out;
+  EXPECT_NE(out.find("no manifest.json"), std::string::npos) << out;
+  std::filesystem::create_directories(dir / "fake_export");
+  std::ofstream(dir / "fake_export" / "manifest.json") << "{}";
+  EXPECT_EQ(run("render-web " + Q(dir / "fake_export") + " -o " + Q(dir / "x.png") + " --chromium /nonexistent/chromium"), 2) << out;
+  EXPECT_NE(out.find("Chromium not found"), std::string::npos) << out;
+  EXPECT_EQ(run("view " + Q(dir / "fake_export") + " --port 0"), 2) << out;
+  EXPECT_EQ(run("view " + Q(dir / "fake_export") + " --node /nonexistent/node --port 8999"), 2) << out;
+  EXPECT_NE(out.find("cannot run '/nonexistent/node'"), std::string::npos) << out;
 }
 
 }  // namespace

@@ -23,20 +23,24 @@ Codec SmallLpca() {
   return test::CompressDataset(d, o);
 }
 
-TEST(SchneiderExport, ReferenceDecoderMatchesCodecToTheQuantizationError) {
+// At grid nodes the trilinear fetch is exact, so the only difference to the codec's own
+// barycentric decoder is the storage rounding: |diff| <= sum_f |terms[1 + f]| * per_t (u8: 1/510,
+// f16: 2^-12), plus 1e-5 for float arithmetic in the decoders (values are O(1)).
+void ExpectGridNodesWithinBound(const std::string& storage, int atlas_side, double min_used_fraction) {
   const Codec codec = SmallLpca();
-  const auto dir = test::TempDir() / "export";
+  const auto dir = test::TempDir() / ("export_" + storage);
   SchneiderExportOptions o;
   o.view_grid = 8;
   o.light_grid = 6;
+  o.storage = storage;
+  o.atlas_side = atlas_side;
   const SchneiderExportSummary s = ExportSchneider(o, codec, dir);
   EXPECT_EQ(s.functions, 3);
-  EXPECT_LE(s.max_quantization_error, 1.0 / 255 + 1e-12);  // half a step of 2/255
+  EXPECT_LE(s.max_quantization_error, StorageQuantizationBound(storage) + 1e-12);
   const SchneiderReferenceDecoder ref(dir);
+  EXPECT_DOUBLE_EQ(ref.quantization_bound(), StorageQuantizationBound(storage));
   double worst_ratio = 0;
   int checked = 0;
-  // At grid nodes the trilinear fetch is exact, so the only difference to the codec's own
-  // barycentric decoder is 8-bit rounding: |diff| <= sum_f |weight_f| / 255 (weights carry the scales).
   for (int y = 0; y < codec.height(); y += 2)
     for (int x = 0; x < codec.width(); x += 2)
       for (int tv : {0, 3, 7})
@@ -48,37 +52,80 @@ TEST(SchneiderExport, ReferenceDecoderMatchesCodecToTheQuantizationError) {
               float a[3], b[3];
               ref.Value(x, y, wi, wo, a);
               codec.Value(Vec2((x + 0.5) / codec.width(), 1 - (y + 0.5) / codec.height()), wi, wo, b, UvFilter::kNearest);
-              double bound = 0;
-              for (int f = 0; f < ref.functions(); ++f) bound += std::abs(ref.weights(y, x)[f]) / 255.0;
+              const double bound = ref.ErrorBound(x, y);
               for (int c = 0; c < 3; ++c) {
                 const double diff = std::abs(double(a[c]) - b[c]);
-                EXPECT_LE(diff, bound + 1e-5) << "texel " << x << "," << y << " channel " << c;
+                EXPECT_LE(diff, bound + 1e-5) << storage << " texel " << x << "," << y << " channel " << c;
                 worst_ratio = std::max(worst_ratio, diff / bound);
                 ++checked;
               }
             }
   EXPECT_GT(checked, 1000);
   // Rounding really happens (the comparison is not vacuous): the largest error uses a visible part of the bound.
-  EXPECT_GT(worst_ratio, 0.05);
+  EXPECT_GT(worst_ratio, min_used_fraction) << storage;
+}
+
+TEST(SchneiderExport, ReferenceDecoderMatchesCodecToTheQuantizationErrorU8) { ExpectGridNodesWithinBound("u8", 256, 0.1); }
+
+// Half floats: 16x finer steps than u8; the float arithmetic margin (1e-5) is then comparable to the bound.
+TEST(SchneiderExport, ReferenceDecoderMatchesCodecToTheQuantizationErrorF16) { ExpectGridNodesWithinBound("f16", 256, 0.01); }
+
+// A small atlas side forces several tiles rows and pages: the layout formula is still what the decoder reads.
+TEST(SchneiderExport, AtlasWithSeveralPagesDecodesTheSame) { ExpectGridNodesWithinBound("u8", 36, 0.1); }
+
+TEST(SchneiderExport, ScaleAndBiasUseTheFullEightBitRange) {
+  const Codec codec = SmallLpca();
+  const auto dir = test::TempDir() / "export";
+  SchneiderExportOptions o;
+  o.view_grid = 8;
+  o.light_grid = 6;
+  const SchneiderExportSummary s = ExportSchneider(o, codec, dir);
+  std::ifstream in(dir / "atlas.u8", std::ios::binary);
+  std::vector<unsigned char> q((std::istreambuf_iterator<char>(in)), {});
+  // Every function's tile holds code 0 (its minimum) and 255 (its maximum): check over all tiles
+  // of page 0 that both extreme codes occur once per function.
+  const int per_tile = 8 * 8 * 36 * 3;
+  ASSERT_EQ(q.size(), std::size_t(s.atlas_pages) * s.atlas_width * s.atlas_height * s.atlas_depth * 3);
+  int lows = 0, highs = 0;
+  for (unsigned char v : q) lows += v == 0, highs += v == 255;
+  EXPECT_GE(lows, s.clusters * s.functions);
+  EXPECT_GE(highs, s.clusters * s.functions);
+  EXPECT_GT(per_tile, 0);
 }
 
 TEST(SchneiderExport, FilesHaveTheManifestShapes) {
   const Codec codec = SmallLpca();
   const auto dir = test::TempDir() / "export";
-  ExportSchneider({}, codec, dir);
+  const SchneiderExportSummary s = ExportSchneider({}, codec, dir);
   std::ifstream in(dir / "manifest.json");
   const auto j = nlohmann::json::parse(in);
   EXPECT_EQ(j["format"], "libbtf-schneider-export");
-  const auto shape = j["eigen_abrdfs"]["shape"];
+  EXPECT_EQ(j["format_version"], "2.0.0");
+  const auto shape = j["atlas"]["shape"];
   std::uint64_t n = 1;
   for (const auto& v : shape) n *= v.get<std::uint64_t>();
-  EXPECT_EQ(std::filesystem::file_size(dir / "eigen_abrdfs.u8"), n);
-  EXPECT_EQ(shape[2], 16 * 16);
-  EXPECT_EQ(std::filesystem::file_size(dir / "weights.f32"), 6u * 5 * 3 * 4);
+  EXPECT_EQ(std::filesystem::file_size(dir / "atlas.u8"), n);
+  // 3 clusters x 3 functions of 16 x 16 texels: one page, 9 tiles in a row, depth 16 x 16 = 256.
+  EXPECT_EQ(j["atlas"]["depth"], 256);
+  EXPECT_EQ(j["atlas"]["pages"], 1);
+  EXPECT_EQ(j["atlas"]["width"], 9 * 16);
+  EXPECT_LE(j["atlas"]["width"].get<int>(), 256);
+  EXPECT_EQ(s.atlas_width, 9 * 16);
+  EXPECT_EQ(std::filesystem::file_size(dir / "terms.f32"), 6u * 5 * 4 * 4);
   EXPECT_EQ(std::filesystem::file_size(dir / "cluster_index.u16"), 6u * 5 * 2);
+  EXPECT_TRUE(std::filesystem::exists(dir / "btf_schneider.glsl"));
   // A truncated file is refused by the reference decoder.
-  std::filesystem::resize_file(dir / "weights.f32", 8);
+  std::filesystem::resize_file(dir / "terms.f32", 8);
   EXPECT_THROW(SchneiderReferenceDecoder{dir}, Error);
+}
+
+TEST(SchneiderExport, RefusesAtlasDepthOverTheLimit) {
+  SchneiderExportOptions o;
+  o.light_grid = 17;  // 289 > 256
+  EXPECT_THROW(o.Check(), Error);
+  o.light_grid = 16;
+  o.storage = "f32";
+  EXPECT_THROW(o.Check(), Error);
 }
 
 TEST(SchneiderExport, RefusesPerViewPcaAndLogCodecs) {

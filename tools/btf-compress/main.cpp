@@ -103,6 +103,10 @@ int main(int argc, char** argv) {
   ce->add_option("--view-grid", ef.options.view_grid, "Samples per side of the (s_v, t_v) square");
   ce->add_option("--light-grid", ef.options.light_grid, "Samples per side of the (s_l, t_l) square");
   ce->add_option("--components", ef.options.components, "Eigen-ABRDFs per cluster to export (-1 = all)");
+  ce->add_option("--storage", ef.options.storage, "Atlas values: u8 (8-bit unsigned normalised) or f16 (half floats)")
+      ->check(CLI::IsMember({"u8", "f16"}));
+  ce->add_option("--atlas-side", ef.options.atlas_side,
+                 "Largest atlas side in texels (3D texture width, height and depth; WebGL2 guarantees 256)");
   ce->add_option("-o,--output", ef.output, "Output folder")->required();
 
   return btf::cli::Main(argc, argv, app, [&] {

@@ -1,9 +1,10 @@
-// btf-eval: compare BTFs, sweep codec settings (error against size and run time), stability suite
-// (docs/btf-eval.md).
+// btf-eval: compare BTFs, sweep codec settings (error against size and run time), stability suite,
+// the WebGL2 viewer and renders of one scene on the CPU and in headless Chromium (docs/btf-eval.md).
 #include "libbtf/compress/codec_source.h"
 #include "libbtf/eval/metrics.h"
 #include "libbtf/eval/sweep.h"
 #include "libbtf/stability/stability.h"
+#include "libbtf/web/web.h"
 #include "tools/common/cli.h"
 
 namespace {
@@ -24,6 +25,54 @@ struct StabilityFlags {
   bool list = false;
   btf::StabilityOptions options;
 };
+
+// view, render-web and render: one set of flags (docs/btf-eval.md, "Viewer and renders").
+struct SceneFlags {
+  std::string source, output, scene = "patch-point", size = "280x224";
+  double exposure = 1;
+  int port = 8000, frames = 0;
+  bool page = false;
+  btf::BrowserOptions browser;
+  int width = 0, height = 0;  // from size
+  void Check() {
+    const auto x = size.find('x');
+    try {
+      if (x == std::string::npos) throw std::invalid_argument("no x");
+      std::size_t used = 0;
+      width = std::stoi(size.substr(0, x), &used);
+      if (used != x) throw std::invalid_argument("trailing");
+      height = std::stoi(size.substr(x + 1), &used);
+      if (used != size.size() - x - 1) throw std::invalid_argument("trailing");
+    } catch (const std::exception&) {
+      btf::ThrowUsage("invalid option '--size': '{}' is not WIDTHxHEIGHT (e.g. 1280x720)", size);
+    }
+    if (!(std::isfinite(exposure) && exposure > 0)) btf::ThrowUsage("invalid option '--exposure': must be > 0");
+    if (frames < 0 || frames > 10000) btf::ThrowUsage("invalid option '--frames': must be 0..10000");
+    browser.Check();
+  }
+  btf::RenderOptions Scene() const { return btf::WebSceneOptions(scene, width, height); }
+};
+
+int RunView(SceneFlags& f) {
+  f.Check();
+  fmt::print("btf-eval view: serving {} at {} (Ctrl-C to stop)\n", f.source, btf::ViewerUrl(f.port));
+  std::fflush(stdout);
+  return btf::ServeViewer(f.browser, f.source, f.port, f.Scene(), f.exposure);
+}
+
+int RunRenderWeb(const CLI::App& app, const btf::cli::CommonFlags& common, SceneFlags& f) {
+  f.Check();
+  btf::WebRenderSummary s = btf::RenderWeb(f.browser, f.Scene(), f.exposure, f.source, f.output, f.scene, f.page);
+  if (f.frames > 0) s.benchmark = btf::BenchmarkWeb(f.browser, f.Scene(), f.exposure, f.source, f.frames);
+  btf::cli::PrintSummary(app, common, s);
+  return 0;
+}
+
+int RunRender(const CLI::App& app, const btf::cli::CommonFlags& common, SceneFlags& f) {
+  f.Check();
+  btf::cli::PrintSummary(app, common, btf::RenderCpu(f.source, f.Scene(), f.exposure, f.output, f.scene));
+  return 0;
+}
 
 int RunCompare(const CLI::App& app, const btf::cli::CommonFlags& common, CompareFlags& f) {
   const btf::Reporter reporter = btf::cli::MakeReporter(common);
@@ -81,7 +130,7 @@ int RunStability(const CLI::App& app, const btf::cli::CommonFlags& common, const
 
 int main(int argc, char** argv) {
   CLI::App app{"Evaluate BTF codecs: compare two BTFs, sweep codec settings (error against size and run time, "
-               "HTML report), run the numerical stability suite.",
+               "HTML report), run the numerical stability suite, view and render exports (CPU and headless Chromium).",
                "btf-eval"};
   btf::cli::Configure(app);
   app.require_subcommand(1);
@@ -131,7 +180,43 @@ int main(int argc, char** argv) {
   stability->add_flag("--list", tf.list, "List the case names and exit");
   btf::cli::AddCommonFlags(*stability, common);
 
+  // The viewer (docs/viewer.md) and the two renders of one scene.
+  SceneFlags vf, wf, rf;
+  auto add_scene = [](CLI::App* c, SceneFlags& f) {
+    c->add_option("--scene", f.scene, "Scene: patch-point (flat patch, point light) or cylinder-env (cylinder, sampled sky)")
+        ->check(CLI::IsMember(btf::WebSceneNames()));
+    c->add_option("--size", f.size, "Image size WIDTHxHEIGHT in pixels");
+    c->add_option("--exposure", f.exposure, "Display value = sRGB(clamp(exposure * radiance, 0, 1))");
+  };
+  auto add_browser = [](CLI::App* c, SceneFlags& f) {
+    c->add_option("--chromium", f.browser.chromium, "Chromium executable");
+    c->add_option("--node", f.browser.node, "node executable");
+    c->add_option("--viewer-dir", f.browser.viewer_dir, "Viewer folder (default: $BTF_VIEWER_DIR, else the source tree's viewer/)");
+  };
+  auto* view = app.add_subcommand("view", "Serve the WebGL2 viewer of EXPORT_DIR on localhost and print its URL");
+  view->add_option("EXPORT_DIR", vf.source, "Export folder (btf-compress export)")->required();
+  view->add_option("--port", vf.port, "TCP port on 127.0.0.1");
+  add_scene(view, vf);
+  add_browser(view, vf);
+  auto* web = app.add_subcommand("render-web", "Render a scene of EXPORT_DIR in headless Chromium (software WebGL2) to a PNG");
+  web->add_option("EXPORT_DIR", wf.source, "Export folder (btf-compress export)")->required();
+  web->add_option("-o,--output", wf.output, "PNG to write (sRGB)")->required();
+  web->add_option("--frames", wf.frames, "Also time this many frames and report ms per frame (0 = no benchmark)");
+  web->add_option("--timeout", wf.browser.timeout_s, "Seconds allowed for one browser run");
+  web->add_flag("--page", wf.page, "Write a screenshot of the interactive page (controls, ms per frame) instead of the frame");
+  add_scene(web, wf);
+  add_browser(web, wf);
+  btf::cli::AddCommonFlags(*web, common);
+  auto* render = app.add_subcommand("render", "Render a scene of an export folder, codec or dataset on the CPU to a PNG");
+  render->add_option("SOURCE", rf.source, "Export folder, codec or dataset file")->required();
+  render->add_option("-o,--output", rf.output, "PNG to write (sRGB)")->required();
+  add_scene(render, rf);
+  btf::cli::AddCommonFlags(*render, common);
+
   return btf::cli::Main(argc, argv, app, [&]() -> int {
+    if (*view) return RunView(vf);
+    if (*web) return RunRenderWeb(app, common, wf);
+    if (*render) return RunRender(app, common, rf);
     if (*stability) return RunStability(app, common, tf);
     if (*sweep) return RunSweep(app, common, sf, argc, argv);
     return RunCompare(app, common, cf);

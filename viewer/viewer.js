@@ -1,0 +1,461 @@
+// libbtf WebGL2 viewer (docs/viewer.md): loads a Schneider export (/export/manifest.json and its
+// files, btf_schneider.glsl included) and draws a plane or a cylinder under a point light or a
+// sampled sky. The surface point of each pixel is the analytic intersection of the pixel's ray
+// (camera -> rasterised proxy fragment) with the shape, as in the CPU renderer
+// (libbtf/eval/render.cpp), so both draw the same (uv, wi, wo) per pixel: the ray is built from
+// gl_FragCoord and the camera's basis exactly as the CPU's Camera::Ray, not from the rasterised
+// position (whose interpolation differs by a fraction of a pixel).
+// Modes (?mode=): view (interactive), shot (one frame -> PNG data URL), eval (btf_eval at the
+// queries in /job/queries.f32 -> float results), bench (ms per frame).
+import * as THREE from 'three';
+import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
+
+const params = new URLSearchParams(location.search);
+const mode = params.get('mode') || 'view';
+const status = (window.btfStatus = { done: false, error: null, result: null });
+
+async function fetchJson(url) {
+  const r = await fetch(url);
+  if (!r.ok) throw new Error(`cannot load ${url}: ${r.status}`);
+  return r.json();
+}
+async function fetchBytes(url) {
+  const r = await fetch(url);
+  if (!r.ok) throw new Error(`cannot load ${url}: ${r.status}`);
+  return r.arrayBuffer();
+}
+async function fetchText(url) {
+  const r = await fetch(url);
+  if (!r.ok) throw new Error(`cannot load ${url}: ${r.status}`);
+  return r.text();
+}
+
+// The default scene: what btf-eval render-web --scene patch-point writes (libbtf/web/scene.cpp).
+const defaultScene = {
+  shape: 'patch', lighting: 'point', width: 960, height: 640, tiles: 3, cylinder_radius: 0.6,
+  camera: { position: [0, -3.2, 2.6], target: [0, 0, 0], up: [0, 0, 1], fov_y_deg: 32 },
+  light: { position: [1.2, -1.4, 2.6], intensity: 10.2 }, background: 0.02, exposure: 1,
+  environment: { directions: [], radiance_solid_angle: [] },
+};
+
+// Export textures (docs/viewer.md, "Binding the textures").
+async function loadExport(base) {
+  const m = await fetchJson(`${base}manifest.json`);
+  if (m.format !== 'libbtf-schneider-export' || !String(m.format_version).startsWith('2.'))
+    throw new Error(`unsupported export: ${m.format} ${m.format_version} (the viewer reads 2.x)`);
+  const a = m.atlas, W = m.texture.width, H = m.texture.height, C = m.texture.channels;
+  const F = m.functions.count_per_cluster, NT = F + 1, NT4 = Math.ceil(NT / 4);
+  const raw = await fetchBytes(base + a.file);
+  const half = a.storage === 'f16';
+  const src = half ? new Uint16Array(raw) : new Uint8Array(raw);
+  const perPage = a.depth * a.height * a.width;
+  if (src.length !== a.pages * perPage * C) throw new Error(`${a.file}: ${src.length} values, expected ${a.pages * perPage * C}`);
+  const pages = [];
+  for (let p = 0; p < a.pages; ++p) {
+    // RGBA (alpha unused): three.js uploads RGBA8 / RGBA16F; the values are those of the file.
+    const data = half ? new Uint16Array(perPage * 4) : new Uint8Array(perPage * 4);
+    for (let i = 0; i < perPage; ++i)
+      for (let c = 0; c < 4; ++c) data[i * 4 + c] = c < C ? src[(p * perPage + i) * C + c] : (c === 3 ? (half ? 0x3c00 : 255) : src[(p * perPage + i) * C]);
+    const t = new THREE.Data3DTexture(data, a.width, a.height, a.depth);
+    t.format = THREE.RGBAFormat;
+    t.type = half ? THREE.HalfFloatType : THREE.UnsignedByteType;
+    t.minFilter = t.magFilter = THREE.LinearFilter;
+    t.wrapS = t.wrapT = t.wrapR = THREE.ClampToEdgeWrapping;
+    t.generateMipmaps = false;
+    t.unpackAlignment = 1;
+    t.colorSpace = THREE.NoColorSpace;
+    t.needsUpdate = true;
+    pages.push(t);
+  }
+  const terms = new Float32Array(await fetchBytes(base + m.terms.file));
+  if (terms.length !== W * H * NT) throw new Error(`${m.terms.file}: ${terms.length} values, expected ${W * H * NT}`);
+  const tdata = new Float32Array(W * NT4 * 4 * H);
+  for (let t = 0; t < W * H; ++t) for (let j = 0; j < NT; ++j) tdata[t * NT4 * 4 + j] = terms[t * NT + j];
+  const termsTex = dataTexture(tdata, W * NT4, H, THREE.RGBAFormat);
+  const idx = new Uint16Array(await fetchBytes(base + m.cluster_index.file));
+  const clusterTex = dataTexture(Float32Array.from(idx), W, H, THREE.RedFormat);
+  const glsl = await fetchText(base + m.glsl.file);
+  const uniforms = { btf_terms: { value: termsTex }, btf_cluster: { value: clusterTex } };
+  pages.forEach((t, p) => (uniforms[p === 0 ? 'btf_atlas' : `btf_atlas${p}`] = { value: t }));
+  return { manifest: m, glsl, uniforms };
+}
+
+function dataTexture(data, w, h, format) {
+  const t = new THREE.DataTexture(data, w, h, format, THREE.FloatType);
+  t.minFilter = t.magFilter = THREE.NearestFilter;
+  t.generateMipmaps = false;
+  t.colorSpace = THREE.NoColorSpace;
+  t.needsUpdate = true;
+  return t;
+}
+
+const vertexShader = `
+precision highp float;
+in vec3 position, normal, tangent;
+in vec2 uv;
+uniform mat4 modelMatrix, viewMatrix, projectionMatrix;
+out vec3 vWorld, vNormal, vTangent;
+out vec2 vUv;
+void main() {
+  vec4 w = modelMatrix * vec4(position, 1.0);
+  vWorld = w.xyz;
+  vNormal = mat3(modelMatrix) * normal;
+  vTangent = mat3(modelMatrix) * tangent;
+  vUv = uv;
+  gl_Position = projectionMatrix * viewMatrix * w;
+}`;
+
+function sceneFragmentShader(glsl) {
+  return `${glsl}
+in vec3 vWorld, vNormal, vTangent;
+in vec2 vUv;
+uniform vec3 camPos, camForward, camRight, camUp;
+uniform float tanHalf;
+uniform vec2 viewport;
+uniform int shape;         // 0 = patch, 1 = cylinder (both analytic), 2 = draped cloth (the mesh itself)
+uniform int lighting;      // 0 = point, 1 = environment
+uniform float tiles, radius, lightIntensity, exposure, background;
+uniform vec3 lightPos;
+uniform bool cosIncluded;
+uniform highp sampler2D envTex;  // row 0: directions, row 1: radiance * solid angle
+uniform int envCount;
+out vec4 fragColor;
+
+bool hitShape(vec3 o, vec3 d, out vec3 p, out vec3 n, out vec3 tu, out vec3 tv, out vec2 uv) {
+  if (shape == 0) {
+    if (abs(d.z) < 1e-12) return false;
+    float t = -o.z / d.z;
+    if (t <= 0.0) return false;
+    p = o + t * d;
+    if (abs(p.x) > 1.0 || abs(p.y) > 1.0) return false;
+    n = vec3(0, 0, 1); tu = vec3(1, 0, 0); tv = vec3(0, 1, 0);
+    uv = vec2((p.x + 1.0) / 2.0 * tiles, (p.y + 1.0) / 2.0 * tiles);
+    return true;
+  }
+  float a = d.y * d.y + d.z * d.z, b = 2.0 * (o.y * d.y + o.z * d.z), c = o.y * o.y + o.z * o.z - radius * radius;
+  float disc = b * b - 4.0 * a * c;
+  if (a < 1e-12 || disc < 0.0) return false;
+  float q = sqrt(disc);
+  for (int i = 0; i < 2; ++i) {
+    float t = i == 0 ? (-b - q) / (2.0 * a) : (-b + q) / (2.0 * a);
+    if (t <= 0.0) continue;
+    p = o + t * d;
+    if (abs(p.x) > 1.0) continue;
+    float phi = atan(p.y, p.z);
+    n = vec3(0, sin(phi), cos(phi)); tu = vec3(1, 0, 0); tv = vec3(0, cos(phi), -sin(phi));
+    float around = tiles * (2.0 * BTF_PI * radius) / 2.0;
+    uv = vec2((p.x + 1.0) / 2.0 * tiles, (phi / (2.0 * BTF_PI) + 0.5) * around);
+    return true;
+  }
+  return false;
+}
+
+float srgb(float v) {
+  v = clamp(v, 0.0, 1.0);
+  return v <= 0.0031308 ? 12.92 * v : 1.055 * pow(v, 1.0 / 2.4) - 0.055;
+}
+
+void main() {
+  vec2 s = (2.0 * gl_FragCoord.xy / viewport - 1.0) * tanHalf * vec2(viewport.x / viewport.y, 1.0);
+  vec3 o = camPos, d = normalize(camForward + s.x * camRight + s.y * camUp);
+  vec3 p, n, tu, tv; vec2 uv;
+  vec3 L = vec3(background);
+  bool hit;
+  if (shape == 2) {
+    // The cloth mesh: its interpolated position, normal and u tangent (Gram-Schmidt), uv as meshed.
+    p = vWorld;
+    n = normalize(vNormal);
+    if (!gl_FrontFacing) n = -n;
+    tu = normalize(vTangent - n * dot(n, vTangent));
+    tv = cross(n, tu);
+    uv = vUv * tiles;
+    hit = true;
+  } else {
+    hit = hitShape(o, d, p, n, tu, tv, uv);
+  }
+  if (hit) {
+    L = vec3(0.0);
+    vec3 toCam = normalize(camPos - p);
+    vec3 wo = vec3(dot(toCam, tu), dot(toCam, tv), dot(toCam, n));
+    if (lighting == 0) {
+      vec3 tl = lightPos - p;
+      float r2 = dot(tl, tl);
+      vec3 l = tl / sqrt(r2);
+      vec3 wi = vec3(dot(l, tu), dot(l, tv), dot(l, n));
+      if (wi.z > 0.0 && wo.z > 0.0) L += btf_eval(uv, wi, wo) * (cosIncluded ? 1.0 : wi.z) * lightIntensity / r2;
+    } else {
+      for (int i = 0; i < envCount; ++i) {
+        vec3 e = texelFetch(envTex, ivec2(i, 0), 0).xyz;
+        vec3 wi = vec3(dot(e, tu), dot(e, tv), dot(e, n));
+        if (wi.z <= 0.0 || wo.z <= 0.0) continue;
+        L += btf_eval(uv, wi, wo) * (cosIncluded ? 1.0 : wi.z) * texelFetch(envTex, ivec2(i, 1), 0).rgb;
+      }
+    }
+  }
+  L *= exposure;
+  fragColor = vec4(srgb(L.r), srgb(L.g), srgb(L.b), 1.0);
+}`;
+}
+
+function evalFragmentShader(glsl) {
+  return `${glsl}
+uniform highp sampler2D qUv, qWi, qWo;
+out vec4 fragColor;
+void main() {
+  ivec2 c = ivec2(gl_FragCoord.xy);
+  fragColor = vec4(btf_eval(texelFetch(qUv, c, 0).xy, texelFetch(qWi, c, 0).xyz, texelFetch(qWo, c, 0).xyz), 1.0);
+}`;
+}
+
+function envTexture(env) {
+  const N = Math.max(1, env.directions.length);
+  const data = new Float32Array(N * 2 * 4);
+  env.directions.forEach((dir, i) => data.set([...dir, 0], i * 4));
+  env.radiance_solid_angle.forEach((rad, i) => data.set([...rad, 0], (N + i) * 4));
+  return dataTexture(data, N, 2, THREE.RGBAFormat);
+}
+
+function srgbEncode(v) {
+  v = Math.min(1, Math.max(0, v));
+  return v <= 0.0031308 ? 12.92 * v : 1.055 * Math.pow(v, 1 / 2.4) - 0.055;
+}
+
+function buildScene(exp, sc) {
+  const uniforms = {
+    ...exp.uniforms,
+    camPos: { value: new THREE.Vector3() }, camForward: { value: new THREE.Vector3() }, camRight: { value: new THREE.Vector3() },
+    camUp: { value: new THREE.Vector3() }, tanHalf: { value: 0 }, viewport: { value: new THREE.Vector2() }, shape: { value: sc.shape === 'cylinder' ? 1 : 0 },
+    lighting: { value: sc.lighting === 'environment' ? 1 : 0 }, tiles: { value: sc.tiles },
+    radius: { value: sc.cylinder_radius }, lightIntensity: { value: sc.light.intensity },
+    exposure: { value: sc.exposure }, background: { value: sc.background },
+    lightPos: { value: new THREE.Vector3(...sc.light.position) },
+    cosIncluded: { value: !!exp.manifest.values.cos_theta_i_included },
+    envTex: { value: envTexture(sc.environment) }, envCount: { value: sc.environment.directions.length },
+  };
+  const material = new THREE.RawShaderMaterial({
+    glslVersion: THREE.GLSL3, vertexShader, fragmentShader: sceneFragmentShader(exp.glsl), uniforms, side: THREE.DoubleSide,
+  });
+  // Proxies slightly larger than the analytic shapes: every pixel of the shape gets a fragment.
+  const meshes = {
+    cloth: new THREE.Mesh(clothGeometry(), material),
+    patch: new THREE.Mesh(new THREE.PlaneGeometry(2.02, 2.02), material),
+    cylinder: new THREE.Mesh(
+      new THREE.CylinderGeometry(sc.cylinder_radius * 1.01, sc.cylinder_radius * 1.01, 2.02, 256, 1, true).rotateZ(-Math.PI / 2),
+      material),
+  };
+  const scene = new THREE.Scene();
+  scene.add(meshes.patch, meshes.cylinder, meshes.cloth);
+  const setShape = (name) => {
+    uniforms.shape.value = { patch: 0, cylinder: 1, cloth: 2 }[name] ?? 0;
+    for (const [k, m] of Object.entries(meshes)) m.visible = k === (name in meshes ? name : 'patch');
+  };
+  setShape(sc.shape);
+  return { scene, uniforms, setShape };
+}
+
+// A cloth draped over a ball: a 2.4 x 2.4 sheet (161 x 161 vertices) whose height falls off from
+// the ball's top with radial folds; uv spans the sheet at the plane's texel size (1.2 repeats of
+// `tiles` per 2.4 units), tangents along u from central differences of the positions.
+function clothGeometry() {
+  const n = 160, g = new THREE.PlaneGeometry(2.4, 2.4, n, n);
+  const pos = g.attributes.position, uv = g.attributes.uv;
+  for (let i = 0; i < pos.count; ++i) {
+    const x = pos.getX(i), y = pos.getY(i), r = Math.hypot(x, y), phi = Math.atan2(y, x);
+    const fold = 1 + 0.12 * Math.sin(7 * phi) * Math.min(1, Math.max(0, (r - 0.35) / 0.5));
+    pos.setZ(i, 0.75 * Math.exp(-(r * r) / 0.45) * fold);
+    uv.setXY(i, uv.getX(i) * 1.2, uv.getY(i) * 1.2);
+  }
+  g.computeVertexNormals();
+  const tangent = new Float32Array(pos.count * 3);
+  for (let row = 0; row <= n; ++row)
+    for (let col = 0; col <= n; ++col) {
+      const i = row * (n + 1) + col, a = row * (n + 1) + Math.max(0, col - 1), b = row * (n + 1) + Math.min(n, col + 1);
+      const t = new THREE.Vector3(pos.getX(b) - pos.getX(a), pos.getY(b) - pos.getY(a), pos.getZ(b) - pos.getZ(a)).normalize();
+      tangent.set([t.x, t.y, t.z], i * 3);
+    }
+  g.setAttribute('tangent', new THREE.BufferAttribute(tangent, 3));
+  return g;
+}
+
+function makeCamera(sc) {
+  const cam = new THREE.PerspectiveCamera(sc.camera.fov_y_deg, sc.width / sc.height, 0.05, 100);
+  cam.up.set(...sc.camera.up);
+  cam.position.set(...sc.camera.position);
+  cam.lookAt(new THREE.Vector3(...sc.camera.target));
+  cam.updateMatrixWorld();
+  return cam;
+}
+
+function makeRenderer(canvas, w, h) {
+  const renderer = new THREE.WebGLRenderer({ canvas, antialias: false, preserveDrawingBuffer: true, alpha: false });
+  renderer.setPixelRatio(1);
+  renderer.setSize(w, h, false);
+  renderer.autoClear = false;
+  return renderer;
+}
+
+function draw(renderer, view, cam, sc) {
+  const gl = renderer.getContext();
+  renderer.setRenderTarget(null);
+  const bg = srgbEncode(sc.background * sc.exposure);
+  // The background radiance, tone-mapped like the shape (three.js's clear colour would be colour-managed).
+  gl.clearColor(bg, bg, bg, 1);
+  gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
+  // The camera basis as the CPU renderer builds it: forward, right = forward x world up, up = right x forward.
+  cam.updateMatrixWorld();
+  const u = view.uniforms, fwd = new THREE.Vector3();
+  cam.getWorldDirection(fwd);
+  u.camPos.value.copy(cam.position);
+  u.camForward.value.copy(fwd);
+  u.camRight.value.crossVectors(fwd, cam.up).normalize();
+  u.camUp.value.crossVectors(u.camRight.value, fwd);
+  u.tanHalf.value = Math.tan((cam.fov * Math.PI) / 360);
+  const size = new THREE.Vector2();
+  renderer.getDrawingBufferSize(size);
+  u.viewport.value.copy(size);
+  renderer.render(view.scene, cam);
+}
+
+// Waits until the GPU has finished: a 1-pixel read back.
+function finish(renderer) {
+  const gl = renderer.getContext();
+  const px = new Uint8Array(4);
+  gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
+}
+
+async function main() {
+  if (mode !== 'view') document.body.classList.add('headless');
+  const exp = await loadExport('./export/');
+  const sc = params.get('job') || mode !== 'view' ? { ...defaultScene, ...(await fetchJson('./job/scene.json')) } : { ...defaultScene };
+  if (mode === 'view') sc.width = innerWidth, sc.height = innerHeight;
+  const canvas = document.getElementById('view');
+  canvas.width = sc.width;
+  canvas.height = sc.height;
+  const renderer = makeRenderer(canvas, sc.width, sc.height);
+  if (!renderer.capabilities.isWebGL2) throw new Error('WebGL2 is needed');
+  if (mode === 'eval') return evalQueries(renderer, exp);
+  const view = buildScene(exp, sc);
+  const cam = makeCamera(sc);
+  if (mode === 'shot') {
+    draw(renderer, view, cam, sc);
+    finish(renderer);
+    status.result = { png: canvas.toDataURL('image/png'), width: sc.width, height: sc.height, renderer: glRendererName(renderer) };
+    return;
+  }
+  if (mode === 'bench') {
+    const frames = Number(params.get('frames') || 10);
+    draw(renderer, view, cam, sc);  // compile and upload outside the timing
+    finish(renderer);
+    const ms = [];
+    for (let i = 0; i < frames; ++i) {
+      const t0 = performance.now();
+      draw(renderer, view, cam, sc);
+      finish(renderer);
+      ms.push(performance.now() - t0);
+    }
+    ms.sort((a, b) => a - b);
+    status.result = { frames, median_ms: ms[Math.floor(frames / 2)], min_ms: ms[0], max_ms: ms[frames - 1],
+                      renderer: glRendererName(renderer) };
+    return;
+  }
+  interactive(renderer, view, cam, sc, exp);
+}
+
+function glRendererName(renderer) {
+  const gl = renderer.getContext();
+  const ext = gl.getExtension('WEBGL_debug_renderer_info');
+  return ext ? gl.getParameter(ext.UNMASKED_RENDERER_WEBGL) : gl.getParameter(gl.RENDERER);
+}
+
+function evalQueries(renderer, exp) {
+  return (async () => {
+    const q = new Float32Array(await fetchBytes('./job/queries.f32'));  // [N][8]: u v wi(3) wo(3)
+    const N = q.length / 8, QW = Math.min(N, 256), QH = Math.ceil(N / QW);
+    const uv = new Float32Array(QW * QH * 4), wi = new Float32Array(QW * QH * 4), wo = new Float32Array(QW * QH * 4);
+    for (let i = 0; i < N; ++i) {
+      uv.set([q[i * 8], q[i * 8 + 1], 0, 0], i * 4);
+      wi.set([q[i * 8 + 2], q[i * 8 + 3], q[i * 8 + 4], 0], i * 4);
+      wo.set([q[i * 8 + 5], q[i * 8 + 6], q[i * 8 + 7], 0], i * 4);
+    }
+    const target = new THREE.WebGLRenderTarget(QW, QH, { type: THREE.FloatType, format: THREE.RGBAFormat,
+                                                         minFilter: THREE.NearestFilter, magFilter: THREE.NearestFilter, depthBuffer: false });
+    const material = new THREE.RawShaderMaterial({
+      glslVersion: THREE.GLSL3,
+      vertexShader: 'in vec3 position; void main() { gl_Position = vec4(position.xy, 0.0, 1.0); }',
+      fragmentShader: evalFragmentShader(exp.glsl),
+      uniforms: { ...exp.uniforms, qUv: { value: dataTexture(uv, QW, QH, THREE.RGBAFormat) },
+                  qWi: { value: dataTexture(wi, QW, QH, THREE.RGBAFormat) }, qWo: { value: dataTexture(wo, QW, QH, THREE.RGBAFormat) } },
+    });
+    const quad = new THREE.Mesh(new THREE.PlaneGeometry(2, 2), material);
+    quad.frustumCulled = false;
+    const scene = new THREE.Scene();
+    scene.add(quad);
+    renderer.setRenderTarget(target);
+    renderer.render(scene, new THREE.Camera());
+    const out = new Float32Array(QW * QH * 4);
+    renderer.readRenderTargetPixels(target, 0, 0, QW, QH, out);
+    renderer.setRenderTarget(null);
+    const values = new Array(N * 3);
+    for (let i = 0; i < N; ++i) for (let c = 0; c < 3; ++c) values[i * 3 + c] = out[i * 4 + c];
+    status.result = { count: N, values, renderer: glRendererName(renderer) };
+  })();
+}
+
+function interactive(renderer, view, cam, sc, exp) {
+  const controls = new OrbitControls(cam, renderer.domElement);
+  controls.target.set(...sc.camera.target);
+  controls.update();
+  const light = new THREE.Vector3(...sc.light.position);
+  let dragging = null;
+  renderer.domElement.addEventListener('contextmenu', (e) => e.preventDefault());
+  renderer.domElement.addEventListener('pointerdown', (e) => {
+    if (e.shiftKey || e.button === 2) { dragging = { x: e.clientX, y: e.clientY }; controls.enabled = false; }
+  });
+  addEventListener('pointerup', () => { dragging = null; controls.enabled = true; });
+  addEventListener('pointermove', (e) => {
+    if (!dragging) return;
+    // Light on a sphere around the origin: horizontal drag = azimuth, vertical = elevation (z up).
+    const dx = e.clientX - dragging.x, dy = e.clientY - dragging.y;
+    dragging = { x: e.clientX, y: e.clientY };
+    const r = light.length(), az = Math.atan2(light.y, light.x) - dx * 0.01;
+    const el = Math.min(Math.PI / 2 - 0.01, Math.max(0.02, Math.asin(light.z / r) + dy * 0.01));
+    light.set(r * Math.cos(el) * Math.cos(az), r * Math.cos(el) * Math.sin(az), r * Math.sin(el));
+    view.uniforms.lightPos.value.copy(light);
+    dirty = true;
+  });
+  controls.addEventListener('change', () => (dirty = true));
+  const sceneSel = document.getElementById('scene'), lightSel = document.getElementById('lighting');
+  sceneSel.value = sc.shape;
+  lightSel.value = sc.lighting;
+  sceneSel.onchange = () => { view.setShape(sceneSel.value); dirty = true; };
+  lightSel.onchange = () => { view.uniforms.lighting.value = lightSel.value === 'environment' ? 1 : 0; dirty = true; };
+  addEventListener('resize', () => {
+    renderer.setSize(innerWidth, innerHeight, false);
+    cam.aspect = innerWidth / innerHeight;
+    cam.updateProjectionMatrix();
+    dirty = true;
+  });
+  const m = exp.manifest;
+  document.getElementById('info').textContent =
+    `${m.texture.width}x${m.texture.height} texels, ${m.scale_bias.shape[0]} clusters x ${m.functions.count_per_cluster} functions, ` +
+    `atlas ${m.atlas.width}x${m.atlas.height}x${m.atlas.depth} ${m.atlas.storage}; ${glRendererName(renderer)}`;
+  const msEl = document.getElementById('ms');
+  let dirty = true, avg = null;
+  const frame = () => {
+    if (dirty) {
+      dirty = false;
+      const t0 = performance.now();
+      draw(renderer, view, cam, sc);
+      finish(renderer);
+      const ms = performance.now() - t0;
+      avg = avg === null ? ms : 0.8 * avg + 0.2 * ms;
+      msEl.textContent = `${avg.toFixed(1)} ms/frame (${renderer.domElement.width}x${renderer.domElement.height})`;
+    }
+    requestAnimationFrame(frame);
+  };
+  frame();
+  status.result = { interactive: true, renderer: glRendererName(renderer) };
+}
+
+main().then(() => (status.done = true), (e) => { status.error = String(e && e.stack || e); status.done = true;
+  const info = document.getElementById('info'); if (info) info.textContent = `error: ${e.message}`; });
