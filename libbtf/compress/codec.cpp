@@ -167,7 +167,8 @@ std::string CompressSummary::Report() const {
     r += fmt::format("  components            {} (per matrix: {})\n", components, fmt::join(slot_components, " "));
   else
     r += fmt::format("  components            {} (max per view slot)\n", components);
-  r += fmt::format("  codec size            {} (coefficients, {} storage)\n", FormatBytes(codec_bytes), storage);
+  r += fmt::format("  codec size            {} ({} bytes; coefficients, {} storage)\n", FormatBytes(codec_bytes), codec_bytes,
+                   storage);
   r += fmt::format("  ratio                 {:.2f}:1 vs float32 raw ({}), {:.2f}:1 vs half raw ({})\n", ratio_float32,
                    FormatBytes(raw_float32_bytes), ratio_half, FormatBytes(raw_half_bytes));
   r += fmt::format("  RMSE                  {:.6g}\n", rmse);

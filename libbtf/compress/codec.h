@@ -99,7 +99,7 @@ struct CompressOptions {
 
 struct CompressSummary {
   std::string method;
-  std::string storage = "float";  // StorageName of the coefficient arrays
+  std::string storage = "float";  // StorageName of the coefficient arrays; lpca-tensor: "uint8" / "uint16" codes
   std::string input;  // dataset path or "in-memory dataset"
   int views = 0, lights = 0, height = 0, width = 0, channels = 0;
   int components = 0;                  // the maximum stored per slot / cluster

@@ -790,7 +790,7 @@ CompressSummary Compress(const CompressOptions& options, const SlotSource& input
                                    o.log_transform ? o.log_epsilon : 0.0);
   CodecBuilder::storage(codec) = o.storage;
   sum.method = MethodName(o.method);
-  sum.storage = StorageName(o.storage);
+  sum.storage = o.method == CodecMethod::kLpcaTensor ? fmt::format("uint{}", o.quant_bits) : StorageName(o.storage);
   sum.views = in.views().size();
   sum.lights = in.lights().size();
   sum.height = in.height();

@@ -348,7 +348,9 @@ TEST(CodecBytes, EveryMethodStaysWithinTheBudget) {
     o.max_bytes = 0;
     CompressSummary more;
     test::CompressDataset(d, o, &more);
-    if (more.components > s.components) EXPECT_GT(more.codec_bytes, one.codec_bytes * 3) << MethodName(m);
+    if (more.components > s.components) {
+      EXPECT_GT(more.codec_bytes, one.codec_bytes * 3) << MethodName(m);
+    }
     o.max_bytes = one.codec_bytes - 1;
     o.components = 64;
     EXPECT_EQ(ExitCodeOf([&] { test::CompressDataset(d, o); }), ExitCode::kUsage) << MethodName(m);
