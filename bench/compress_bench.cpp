@@ -13,8 +13,10 @@
 #include <cmath>
 #include <cstdlib>
 #include <limits>
+#include <map>
 #include <memory>
 #include <random>
+#include <sstream>
 
 #include <omp.h>
 
@@ -367,6 +369,44 @@ void BM_DecodeValue(benchmark::State& st) {
   st.counters["values_per_s"] = benchmark::Counter(double(st.iterations()), benchmark::Counter::kIsRate);
 }
 BENCHMARK(BM_DecodeValue)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond)->MinTime(1.0)->UseRealTime();
+
+// Decoding of codec files named by BTF_BENCH_CODECS (comma-separated paths; none: not run): one
+// view slot per iteration, cycling through the views, on 1 thread and on all; values_per_s as in
+// BM_DecodeViewSlot. Compares codecs of one dataset (docs/btf-compress.md, "lpca-tensor").
+const bool g_codec_files_registered = [] {
+  const char* e = std::getenv("BTF_BENCH_CODECS");
+  if (!e) return false;
+  std::stringstream list(e);
+  std::string path;
+  while (std::getline(list, path, ',')) {
+    if (path.empty()) continue;
+    benchmark::RegisterBenchmark(("BM_DecodeCodecFile/" + path).c_str(),
+                                 [path](benchmark::State& st) {
+                                   static std::map<std::string, btf::Codec> cache;
+                                   if (!cache.count(path)) cache[path] = btf::ReadCodec(path);
+                                   const btf::Codec& c = cache[path];
+                                   std::vector<float> out(c.image_size() * c.num_lights());
+                                   const int before = omp_get_max_threads();
+                                   if (st.range(0) > 0) omp_set_num_threads(static_cast<int>(st.range(0)));
+                                   int v = 0;
+                                   for (auto _ : st) {
+                                     c.DecodeViewSlot(v, out.data());
+                                     v = (v + 1) % c.num_views();
+                                     benchmark::DoNotOptimize(out.data());
+                                   }
+                                   omp_set_num_threads(before);
+                                   st.SetLabel(btf::MethodName(c.method()) + (st.range(0) == 1 ? ", 1 thread" : ", all threads"));
+                                   st.counters["values_per_s"] = benchmark::Counter(
+                                       double(st.iterations()) * double(out.size()), benchmark::Counter::kIsRate);
+                                 })
+        ->Arg(1)
+        ->Arg(0)
+        ->Unit(benchmark::kMillisecond)
+        ->MinTime(2.0)
+        ->UseRealTime();
+  }
+  return true;
+}();
 
 }  // namespace
 

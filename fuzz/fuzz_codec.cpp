@@ -43,7 +43,7 @@ class Bytes {
   std::size_t n_, i_ = 0;
 };
 
-std::array<std::string, 4> base_paths;
+std::array<std::string, 6> base_paths;
 
 btf::Dataset TinyDataset() {
   const btf::Sampling views("v", {btf::Vec3(0, 0, 1), btf::Vec3(0.5, 0, 0.866), btf::Vec3(0, 0.5, 0.866)});
@@ -124,7 +124,7 @@ void ReplaceAttribute(const btf::h5::File& f, const std::string& item, Bytes& b)
   const auto at = item.find('@');
   const std::string object = item.substr(0, at), name = item.substr(at + 1);
   H5Adelete_by_name(f.id(), object.c_str(), name.c_str(), H5P_DEFAULT);
-  static const char* const kStrings[] = {"pca-view", "lpca", "fmf", "dfmf", "log", "none", "R,G,B", "", "2.0.0",
+  static const char* const kStrings[] = {"pca-view", "lpca", "fmf", "dfmf", "lpca-tensor", "log", "none", "R,G,B", "", "2.0.0",
                                          "1.0.0", "libbtf-codec", "libbtf-dataset", "Y", "R,,B"};
   switch (b.Next() % 4) {
     case 0: return;  // deleted
@@ -162,6 +162,18 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
     fmf.log_transform = i == 2;
     base_paths[std::size_t(i)] = dir + (i == 2 ? "/fmf.h5" : "/dfmf.h5");
     btf::Compress(fmf, *btf::MemorySource(d), &codec);
+    btf::WriteCodec(base_paths[std::size_t(i)], codec);
+  }
+  for (int i : {4, 5}) {  // lpca-tensor: 8-bit codes (log) and 16-bit codes
+    btf::CompressOptions t;
+    t.method = btf::CodecMethod::kLpcaTensor;
+    t.clusters = 2;
+    t.components = 2;
+    t.quant_bits = i == 4 ? 8 : 16;
+    t.log_transform = i == 4;
+    t.tensor_growth = 0;  // every term: the largest factor arrays the tiny input gives
+    base_paths[std::size_t(i)] = dir + (i == 4 ? "/tensor8.h5" : "/tensor16.h5");
+    btf::Compress(t, *btf::MemorySource(d), &codec);
     btf::WriteCodec(base_paths[std::size_t(i)], codec);
   }
   return 0;

@@ -11,6 +11,42 @@ namespace btf {
 
 namespace {
 using RowMajorF = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+// LPCA's view-slot loop: per block of kTexels texels, their L*C values of this view into a
+// per-thread buffer (mean + weighted basis rows, contiguous; mean(k) and basis(k, j) point at the
+// view's L*C values), then written out light by light (contiguous runs of kTexels*C values). No
+// allocation per texel.
+template <typename Mean, typename Basis>
+void ClusterTexelLoop(const std::vector<std::int32_t>& cluster_of, const std::vector<std::int32_t>& cluster_components,
+                      const std::vector<float>& weights, int stride, std::size_t T, int L, int C, const Mean& mean,
+                      const Basis& basis, float* out) {
+  const std::size_t seg = std::size_t(L) * C;
+  constexpr std::size_t kTexels = 64;
+  const std::ptrdiff_t blocks = static_cast<std::ptrdiff_t>((T + kTexels - 1) / kTexels);
+#pragma omp parallel
+  {
+    // Eigen-aligned: Eigen peels to the destination's alignment, so the values do not depend
+    // on where malloc put the buffer.
+    Eigen::VectorXf buf(static_cast<Eigen::Index>(kTexels * seg));
+#pragma omp for schedule(static)
+    for (std::ptrdiff_t b = 0; b < blocks; ++b) {
+      const std::size_t t0 = std::size_t(b) * kTexels, nt = std::min(kTexels, T - t0);
+      for (std::size_t i = 0; i < nt; ++i) {
+        const std::size_t t = t0 + i;
+        const int k = cluster_of[t];
+        auto v = buf.segment(static_cast<Eigen::Index>(i * seg), static_cast<Eigen::Index>(seg));
+        v = Eigen::Map<const Eigen::VectorXf>(mean(k), static_cast<Eigen::Index>(seg));
+        for (int j = 0; j < cluster_components[static_cast<std::size_t>(k)]; ++j)
+          v += weights[t * stride + j] * Eigen::Map<const Eigen::VectorXf>(basis(k, j), static_cast<Eigen::Index>(seg));
+      }
+      for (int l = 0; l < L; ++l) {
+        float* o = out + (std::size_t(l) * T + t0) * C;
+        for (std::size_t i = 0; i < nt; ++i)
+          for (int ch = 0; ch < C; ++ch) o[i * C + ch] = buf[static_cast<Eigen::Index>(i * seg + std::size_t(l) * C + ch)];
+      }
+    }
+  }
+}
 }
 
 std::string MethodName(CodecMethod method) {
@@ -19,6 +55,7 @@ std::string MethodName(CodecMethod method) {
     case CodecMethod::kLpca: return "lpca";
     case CodecMethod::kFmf: return "fmf";
     case CodecMethod::kDfmf: return "dfmf";
+    case CodecMethod::kLpcaTensor: return "lpca-tensor";
   }
   return "unknown";
 }
@@ -28,7 +65,8 @@ CodecMethod ParseMethod(const std::string& name) {
   if (name == "lpca") return CodecMethod::kLpca;
   if (name == "fmf") return CodecMethod::kFmf;
   if (name == "dfmf") return CodecMethod::kDfmf;
-  ThrowUsage("unknown compression method '{}' (use pca-view, lpca, fmf or dfmf)", name);
+  if (name == "lpca-tensor") return CodecMethod::kLpcaTensor;
+  ThrowUsage("unknown compression method '{}' (use pca-view, lpca, lpca-tensor, fmf or dfmf)", name);
 }
 
 std::string StorageName(CodecStorage storage) { return storage == CodecStorage::kHalf ? "half" : "float"; }
@@ -45,6 +83,14 @@ void CompressOptions::Check() const {
   BTF_CHECK_OPTION(target_error >= 0 && target_error < 1, "error", "a relative RMS error in [0, 1)");
   BTF_CHECK_OPTION(retained_energy >= 0 && retained_energy <= 1, "energy", "a fraction in [0, 1]");
   BTF_CHECK_OPTION(!(target_error > 0 && retained_energy > 0), "error/energy", "give at most one of the two");
+  BTF_CHECK_OPTION(max_bytes == 0 || (target_error == 0 && retained_energy == 0), "bytes",
+                   "give at most one of --bytes, --error and --energy");
+  BTF_CHECK_OPTION(quant_bits == 8 || quant_bits == 16, "quant_bits", "must be 8 or 16");
+  BTF_CHECK_OPTION(tensor_growth >= 0 && std::isfinite(tensor_growth), "tensor_growth", "must be >= 0");
+  BTF_CHECK_OPTION(method != CodecMethod::kLpcaTensor || retained_energy == 0, "energy",
+                   "lpca-tensor takes --error or --bytes (its terms are chosen by the codec's error)");
+  BTF_CHECK_OPTION(method != CodecMethod::kLpcaTensor || storage == CodecStorage::kFloat, "storage",
+                   "lpca-tensor stores quantised codes (--quant-bits), not float or half arrays");
   BTF_CHECK_OPTION(log_epsilon > 0 && std::isfinite(log_epsilon), "log_epsilon", "must be > 0");
   BTF_CHECK_OPTION(max_iterations >= 0 && max_iterations <= 1000, "max_iterations", "must be 0..1000");
   BTF_CHECK_OPTION(min_improvement >= 0 && min_improvement < 1, "min_improvement", "must be in [0, 1)");
@@ -59,7 +105,9 @@ nlohmann::json CompressOptions::ToJson() const {
           {"retained_energy", retained_energy}, {"seed", seed},
           {"log_transform", log_transform}, {"log_epsilon", log_epsilon},
           {"max_iterations", max_iterations}, {"min_improvement", min_improvement},
-          {"gram_limit", gram_limit},       {"storage", StorageName(storage)}};
+          {"gram_limit", gram_limit},       {"storage", StorageName(storage)},
+          {"max_bytes", max_bytes},         {"quant_bits", quant_bits},
+          {"tensor_growth", tensor_growth}};
 }
 
 nlohmann::json CompressSummary::ToJson() const {
@@ -69,13 +117,19 @@ nlohmann::json CompressSummary::ToJson() const {
   j["input"] = input;
   j["shape"] = {{"views", views}, {"lights", lights}, {"height", height}, {"width", width}, {"channels", channels}};
   j["components"] = components;
-  j[method == "lpca" ? "cluster_components" : method == "fmf" || method == "dfmf" ? "matrix_components" : "slot_components"] =
+  const bool lpca_like = method == "lpca" || method == "lpca-tensor";
+  j[lpca_like ? "cluster_components" : method == "fmf" || method == "dfmf" ? "matrix_components" : "slot_components"] =
       slot_components;
-  if (method == "lpca") {
+  if (lpca_like) {
     j["clusters"] = clusters;
     j["iteration_relative_errors"] = iteration_errors;
     j["iteration_reassigned_texels"] = iteration_changes;
   }
+  if (method == "lpca-tensor")
+    j["tensor"] = {{"terms", tensor_terms},
+                   {"quant_bits", quant_bits},
+                   {"lpca_stage_relative_error", lpca_stage_error},
+                   {"predicted_relative_error", predicted_error}};
   j["codec_bytes"] = codec_bytes;
   j["raw_float32_bytes"] = raw_float32_bytes;
   j["raw_half_bytes"] = raw_half_bytes;
@@ -104,19 +158,23 @@ std::string CompressSummary::Report() const {
   std::string r = fmt::format("{} ({})\n", input, method);
   r += fmt::format("  shape                 {} views x {} lights x {} x {} texels x {} channels\n", views, lights, width,
                    height, channels);
-  if (method == "lpca")
+  if (method == "lpca" || method == "lpca-tensor")
     r += fmt::format("  clusters x components {} x {} (max per cluster)\n", clusters, components);
+  if (method == "lpca-tensor")
+    r += fmt::format("  factor terms          {} ({}-bit codes; LPCA stage error {:.6g}, predicted {:.6g})\n", tensor_terms,
+                     quant_bits, lpca_stage_error, predicted_error);
   else if (method == "fmf" || method == "dfmf")
     r += fmt::format("  components            {} (per matrix: {})\n", components, fmt::join(slot_components, " "));
   else
     r += fmt::format("  components            {} (max per view slot)\n", components);
-  r += fmt::format("  codec size            {} (coefficients, {} storage)\n", FormatBytes(codec_bytes), storage);
+  r += fmt::format("  codec size            {} ({} bytes; coefficients, {} storage)\n", FormatBytes(codec_bytes), codec_bytes,
+                   storage);
   r += fmt::format("  ratio                 {:.2f}:1 vs float32 raw ({}), {:.2f}:1 vs half raw ({})\n", ratio_float32,
                    FormatBytes(raw_float32_bytes), ratio_half, FormatBytes(raw_half_bytes));
   r += fmt::format("  RMSE                  {:.6g}\n", rmse);
   r += fmt::format("  relative error        {:.6g} (||decoded - input|| / ||input||)\n", relative_error);
   r += fmt::format("  PSNR                  {:.2f} dB (peak = {} = {:.6g})\n", psnr_db, psnr_peak_definition, psnr_peak);
-  if (method == "lpca")
+  if (method == "lpca" || method == "lpca-tensor")
     r += fmt::format("  iteration errors      {:.5f}\n", fmt::join(iteration_errors, " "));
   if (scene_used)
     r += fmt::format("  scene                 kept {}/{} views, {}/{} lights; full codec {} -> saved {}; error on used "
@@ -145,6 +203,7 @@ Codec CodecBuilder::Make(CodecMethod method, Sampling views, Sampling lights, in
 
 std::uint64_t Codec::StoredBytes() const {
   std::uint64_t floats = 0, ints = 0;
+  if (method_ == CodecMethod::kLpcaTensor) return tensor_.StoredBytes();
   if (method_ == CodecMethod::kPcaView) {
     for (const auto& s : slots_) floats += s.mean.size() + s.basis.size() + s.weights.size();
   } else if (IsFullMatrixFactorisation(method_)) {
@@ -167,6 +226,7 @@ float Codec::Untransform(float y) const {
 
 void Codec::SampleTransformed(int view, int light, std::size_t texel, float* out) const {
   if (IsFullMatrixFactorisation(method_)) return fmf_.Sample(view, light, texel, out);
+  if (method_ == CodecMethod::kLpcaTensor) return tensor_.Sample(view, light, texel, out);
   const int C = channels_;
   if (method_ == CodecMethod::kPcaView) {
     const PcaViewSlot& s = slots_[static_cast<std::size_t>(view)];
@@ -211,39 +271,21 @@ void Codec::DecodeViewSlot(int view, float* out) const {
     }
   } else if (IsFullMatrixFactorisation(method_)) {
     fmf_.DecodeViewSlot(view, out);
+  } else if (method_ == CodecMethod::kLpcaTensor) {
+    // The view's rows of every cluster function (K (1 + c) L C floats), then LPCA's texel loop.
+    const LpcaTensorModel& m = tensor_;
+    std::vector<float> rows;
+    m.FunctionsAtView(view, rows);
+    const std::size_t S = m.seg(), F = static_cast<std::size_t>(m.functions_per_cluster());
+    ClusterTexelLoop(m.cluster_of, m.cluster_components, m.weights, m.components, T, L, C,
+                     [&](int k) { return &rows[std::size_t(k) * F * S]; },
+                     [&](int k, int j) { return &rows[(std::size_t(k) * F + 1 + j) * S]; }, out);
   } else {
-    // Per block of kTexels texels: their L*C values of this view into a per-thread buffer
-    // (mean + weighted basis rows, contiguous), then written out light by light (contiguous
-    // runs of kTexels*C values). No allocation per texel.
     const LpcaModel& m = lpca_;
-    const std::size_t d = abrdf_size(), seg = std::size_t(L) * C, base = std::size_t(view) * seg;
-    constexpr std::size_t kTexels = 64;
-    const std::ptrdiff_t blocks = static_cast<std::ptrdiff_t>((T + kTexels - 1) / kTexels);
-#pragma omp parallel
-    {
-      // Eigen-aligned: Eigen peels to the destination's alignment, so the values do not depend
-      // on where malloc put the buffer.
-      Eigen::VectorXf buf(static_cast<Eigen::Index>(kTexels * seg));
-#pragma omp for schedule(static)
-      for (std::ptrdiff_t b = 0; b < blocks; ++b) {
-        const std::size_t t0 = std::size_t(b) * kTexels, nt = std::min(kTexels, T - t0);
-        for (std::size_t i = 0; i < nt; ++i) {
-          const std::size_t t = t0 + i;
-          const int k = m.cluster_of[t];
-          auto v = buf.segment(static_cast<Eigen::Index>(i * seg), static_cast<Eigen::Index>(seg));
-          v = Eigen::Map<const Eigen::VectorXf>(&m.means[std::size_t(k) * d + base], static_cast<Eigen::Index>(seg));
-          for (int j = 0; j < m.cluster_components[static_cast<std::size_t>(k)]; ++j)
-            v += m.weights[t * m.components + j] *
-                 Eigen::Map<const Eigen::VectorXf>(&m.basis[(std::size_t(k) * m.components + j) * d + base],
-                                                   static_cast<Eigen::Index>(seg));
-        }
-        for (int l = 0; l < L; ++l) {
-          float* o = out + (std::size_t(l) * T + t0) * C;
-          for (std::size_t i = 0; i < nt; ++i)
-            for (int ch = 0; ch < C; ++ch) o[i * C + ch] = buf[static_cast<Eigen::Index>(i * seg + std::size_t(l) * C + ch)];
-        }
-      }
-    }
+    const std::size_t d = abrdf_size(), base = std::size_t(view) * std::size_t(L) * C;
+    ClusterTexelLoop(m.cluster_of, m.cluster_components, m.weights, m.components, T, L, C,
+                     [&](int k) { return &m.means[std::size_t(k) * d + base]; },
+                     [&](int k, int j) { return &m.basis[(std::size_t(k) * m.components + j) * d + base]; }, out);
   }
   if (transform_ != ValueTransform::kNone) {
     const std::size_t n = std::size_t(L) * D;
@@ -272,6 +314,24 @@ void Codec::DecodeImage(int view, int light, float* out) const {
     fmf_.DecodeImage(view, light, out);
     if (transform_ != ValueTransform::kNone)
       for (std::size_t i = 0; i < D; ++i) out[i] = Untransform(out[i]);
+  } else if (method_ == CodecMethod::kLpcaTensor) {
+    // Every cluster function at (view, light) first (K (1 + c) C values), then per texel.
+    const LpcaTensorModel& m = tensor_;
+    const int F = m.functions_per_cluster(), C = channels_;
+    std::vector<double> at(std::size_t(m.clusters) * F * C, 0.0);
+    for (int k = 0; k < m.clusters; ++k)
+      for (int f = 0; f <= m.cluster_components[static_cast<std::size_t>(k)]; ++f)
+        m.AddFunction(k, f, view, light, 1.0, &at[(std::size_t(k) * F + f) * C]);
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t t = 0; t < static_cast<std::ptrdiff_t>(T); ++t) {
+      const int k = m.cluster_of[static_cast<std::size_t>(t)];
+      for (int ch = 0; ch < C; ++ch) {
+        double v = at[std::size_t(k) * F * C + ch];
+        for (int j = 0; j < m.cluster_components[static_cast<std::size_t>(k)]; ++j)
+          v += double(m.weights[std::size_t(t) * m.components + j]) * at[(std::size_t(k) * F + 1 + j) * C + ch];
+        out[t * C + ch] = Untransform(static_cast<float>(v));
+      }
+    }
   } else {
 #pragma omp parallel for schedule(static)
     for (std::ptrdiff_t t = 0; t < static_cast<std::ptrdiff_t>(T); ++t) {
@@ -297,6 +357,9 @@ std::vector<float> Codec::DecodeAbrdf(int y, int x) const {
       o += m.weights[t * m.components + j] *
            Eigen::Map<const Eigen::VectorXf>(&m.basis[(std::size_t(k) * m.components + j) * d],
                                              static_cast<Eigen::Index>(d));
+    for (auto& v : out) v = Untransform(v);
+  } else if (method_ == CodecMethod::kLpcaTensor) {
+    tensor_.DecodeAbrdf(t, out.data());
     for (auto& v : out) v = Untransform(v);
   } else {
     for (int v = 0; v < num_views(); ++v)
@@ -369,11 +432,16 @@ nlohmann::json Codec::Describe() const {
     j["components_per_slot"] = {{"min", slots_.empty() ? 0 : lo}, {"max", hi}};
   } else if (IsFullMatrixFactorisation(method_)) {
     for (const auto& m : fmf_.matrices) j["components_per_matrix"].push_back(m.components);
+  } else if (method_ == CodecMethod::kLpcaTensor) {
+    j["clusters"] = tensor_.clusters;
+    j["components"] = tensor_.components;
+    j["factor_terms"] = tensor_.terms();
+    j["quant_bits"] = tensor_.bits;
   } else {
     j["clusters"] = lpca_.clusters;
     j["components"] = lpca_.components;
   }
-  j["storage"] = StorageName(storage_);
+  j["storage"] = method_ == CodecMethod::kLpcaTensor ? fmt::format("uint{}", tensor_.bits) : StorageName(storage_);
   j["stored_bytes"] = StoredBytes();
   j["raw_float32_bytes"] = RawBytes(4);
   j["raw_half_bytes"] = RawBytes(2);

@@ -1,6 +1,7 @@
 #pragma once
 // BTF codecs: per-view PCA (Sattler et al. 2003), local PCA (Mueller et al. 2003, as described
-// in Schneider 2004 section 3) and Bonn's full-matrix factorisations FMF / DFMF (fmf_codec.h),
+// in Schneider 2004 section 3), LPCA with factorised Eigen-ABRDFs (lpca_tensor.h) and Bonn's
+// full-matrix factorisations FMF / DFMF (fmf_codec.h),
 // their file format "libbtf-codec" (docs/format.md) and decoders.
 //
 // Stable public API (btf-eval and btf-compress code against it):
@@ -17,6 +18,7 @@
 #include <nlohmann/json.hpp>
 
 #include "libbtf/compress/fmf_codec.h"
+#include "libbtf/compress/lpca_tensor.h"
 #include "libbtf/compress/scene.h"
 #include "libbtf/core/atomic_file.h"
 #include "libbtf/core/dataset.h"
@@ -27,11 +29,11 @@
 namespace btf {
 
 inline constexpr const char* kCodecFormat = "libbtf-codec";
-inline constexpr const char* kCodecFormatVersion = "1.1.0";
+inline constexpr const char* kCodecFormatVersion = "1.2.0";
 inline constexpr int kCodecFormatMajor = 1;
 
-enum class CodecMethod { kPcaView, kLpca, kFmf, kDfmf };
-// "pca-view" / "lpca" / "fmf" / "dfmf".
+enum class CodecMethod { kPcaView, kLpca, kFmf, kDfmf, kLpcaTensor };
+// "pca-view" / "lpca" / "fmf" / "dfmf" / "lpca-tensor".
 std::string MethodName(CodecMethod method);
 // Throws btf::Error (usage) for unknown names.
 CodecMethod ParseMethod(const std::string& name);
@@ -67,6 +69,18 @@ struct CompressOptions {
   double target_error = 0;
   // If > 0 (and < 1): the smallest c retaining this fraction of the centered variance.
   double retained_energy = 0;
+  // If > 0: a byte budget for Codec::StoredBytes() (--bytes). pca-view, lpca, fmf, dfmf: the
+  // largest c <= components whose codec is guaranteed to fit (their size grows with c; clamping
+  // only shrinks it), refused (usage) if c = 1 does not fit. lpca-tensor: the factor terms with
+  // the largest error reduction that fit after the fixed part (cluster tables and weights).
+  // Excludes target_error and retained_energy.
+  std::uint64_t max_bytes = 0;
+  // lpca-tensor: bits of the quantised factors and weights (8 or 16).
+  int quant_bits = 16;
+  // lpca-tensor without target_error or max_bytes: keep factor terms until the dropped energy is
+  // at most this fraction of the LPCA stage's squared residual (the codec's squared error grows
+  // by at most this factor, before quantisation).
+  double tensor_growth = 0.1;
   std::uint64_t seed = 1;  // k-means++ seeding and randomized SVD (deterministic for a seed)
   bool log_transform = false;
   double log_epsilon = 1e-3;  // epsilon of the log transform, in data units (1/sr)
@@ -85,7 +99,7 @@ struct CompressOptions {
 
 struct CompressSummary {
   std::string method;
-  std::string storage = "float";  // StorageName of the coefficient arrays
+  std::string storage = "float";  // StorageName of the coefficient arrays; lpca-tensor: "uint8" / "uint16" codes
   std::string input;  // dataset path or "in-memory dataset"
   int views = 0, lights = 0, height = 0, width = 0, channels = 0;
   int components = 0;                  // the maximum stored per slot / cluster
@@ -93,6 +107,10 @@ struct CompressSummary {
   int clusters = 0;                    // lpca
   std::vector<double> iteration_errors;  // lpca: relative error after each PCA/reassignment round
   std::vector<int> iteration_changes;    // lpca: texels that changed cluster in each round
+  // lpca-tensor: rank-1 terms kept, quantisation bits, the LPCA stage's relative error and the
+  // predicted error of the factorised codec (transformed domain, before quantisation of weights).
+  int tensor_terms = 0, quant_bits = 0;
+  double lpca_stage_error = 0, predicted_error = 0;
   std::uint64_t codec_bytes = 0;         // Codec::StoredBytes() (float arrays at 2 bytes with half storage)
   std::uint64_t raw_float32_bytes = 0, raw_half_bytes = 0;  // of the encoded (possibly reduced) BTF
   double ratio_float32 = 0, ratio_half = 0;
@@ -153,6 +171,7 @@ class Codec {
   const std::vector<PcaViewSlot>& pca_view() const { return slots_; }
   const LpcaModel& lpca() const { return lpca_; }
   const FmfModel& fmf() const { return fmf_; }
+  const LpcaTensorModel& lpca_tensor() const { return tensor_; }
   // Options and summary of the compression that made it (JSON, stored in the file).
   const nlohmann::json& provenance() const { return provenance_; }
 
@@ -192,6 +211,7 @@ class Codec {
   std::vector<PcaViewSlot> slots_;
   LpcaModel lpca_;
   FmfModel fmf_;
+  LpcaTensorModel tensor_;
   nlohmann::json provenance_ = nlohmann::json::object();
 };
 
@@ -203,6 +223,7 @@ class CodecBuilder {
   static std::vector<PcaViewSlot>& slots(Codec& c) { return c.slots_; }
   static LpcaModel& lpca(Codec& c) { return c.lpca_; }
   static FmfModel& fmf(Codec& c) { return c.fmf_; }
+  static LpcaTensorModel& lpca_tensor(Codec& c) { return c.tensor_; }
   static nlohmann::json& provenance(Codec& c) { return c.provenance_; }
   static CodecStorage& storage(Codec& c) { return c.storage_; }
 };
@@ -214,7 +235,7 @@ class CodecBuilder {
 CompressSummary Compress(const CompressOptions& options, const SlotSource& input, Codec* codec,
                          const Reporter& reporter = {});
 
-// Codec files ("libbtf-codec" 1.1.0, docs/format.md). Written atomically.
+// Codec files ("libbtf-codec" 1.2.0, docs/format.md). Written atomically.
 void WriteCodec(const std::filesystem::path& path, const Codec& codec, const std::string& creator = "libbtf");
 // Writes into `out`'s temporary and commits it (for callers that reserved the output early).
 void WriteCodec(AtomicOutput& out, const Codec& codec, const std::string& creator = "libbtf");

@@ -1,4 +1,4 @@
-// Codec file "libbtf-codec" version 1.1.0 (normative description: docs/format.md).
+// Codec file "libbtf-codec" version 1.2.0 (normative description: docs/format.md).
 #include <cmath>
 #include <sstream>
 
@@ -93,6 +93,8 @@ void WriteCodec(AtomicOutput& out, const Codec& c, const std::string& creator) {
       }
     } else if (IsFullMatrixFactorisation(c.method())) {
       WriteFmfModel(f, c.fmf(), c.num_views(), c.height(), c.width());
+    } else if (c.method() == CodecMethod::kLpcaTensor) {
+      WriteLpcaTensorModel(f, c.lpca_tensor(), c.height(), c.width());
     } else {
       const LpcaModel& m = c.lpca();
       const hsize_t K = m.clusters, k = m.components;
@@ -118,7 +120,7 @@ Codec ReadCodec(const std::filesystem::path& path) {
   if (!f.Exists("/codec")) ThrowBadInput("'{}': required group '/codec' is missing", path.string());
   const CodecMethod method = [&] {
     const std::string m = f.GetString("/codec", "method");
-    if (m != "pca-view" && m != "lpca" && m != "fmf" && m != "dfmf")
+    if (m != "pca-view" && m != "lpca" && m != "fmf" && m != "dfmf" && m != "lpca-tensor")
       ThrowBadInput("'{}': unknown codec method '{}'", path.string(), m);
     return ParseMethod(m);
   }();
@@ -179,6 +181,8 @@ Codec ReadCodec(const std::filesystem::path& path) {
     }
   } else if (IsFullMatrixFactorisation(method)) {
     CodecBuilder::fmf(c) = ReadFmfModel(f, method == CodecMethod::kDfmf, int(V), int(L), H, W, C);
+  } else if (method == CodecMethod::kLpcaTensor) {
+    CodecBuilder::lpca_tensor(c) = ReadLpcaTensorModel(f, int(V), int(L), H, W, C);
   } else {
     LpcaModel& m = CodecBuilder::lpca(c);
     const auto K = f.GetInt("/codec/lpca", "clusters"), k = f.GetInt("/codec/lpca", "components");

@@ -245,7 +245,8 @@ class LpcaCompressor {
         N_(std::size_t(in.height()) * in.width()),
         d_(std::size_t(in.views().size()) * in.lights().size() * in.channels()) {}
 
-  void Run(Codec& codec) {
+  // measure = false: no error pass (lpca-tensor measures its own codec).
+  void Run(Codec& codec, bool measure = true) {
     Timer t;
     ReadTexelMajor();
     sum_.times.Add("read", t.Seconds());
@@ -256,9 +257,36 @@ class LpcaCompressor {
     Iterate(fit);
     sum_.times.Add("iterate", t.Seconds());
     StoreModel(fit, codec);
+    residual_energy_ = fit.error * fit.error * total_;
+    if (!measure) return;
     t.Restart();
     FillErrors(MeasureErrors(in_, codec), sum_);
     sum_.times.Add("evaluate", t.Seconds());
+  }
+
+  // Of the transformed input: sum of squares, and the squared residual of the kept fit.
+  double total_energy() const { return total_; }
+  double residual_energy() const { return residual_energy_; }
+
+  // Errors in the original domain: decode slot by slot against the input, one image per task,
+  // merged in (view, light) order.
+  static ErrorStats MeasureErrors(const SlotSource& in, const Codec& codec) {
+    const int V = in.views().size(), L = in.lights().size();
+    const std::size_t image = in.image_size();
+    ErrorStats err;
+    std::vector<float> ref(in.slot_size()), dec(in.slot_size());
+    std::vector<ErrorStats> per_light(static_cast<std::size_t>(L));
+    for (int v = 0; v < V; ++v) {
+      in.ReadViewSlot(v, ref.data());
+      codec.DecodeViewSlot(v, dec.data());
+#pragma omp parallel for schedule(static)
+      for (int l = 0; l < L; ++l) {
+        per_light[static_cast<std::size_t>(l)] = ErrorStats();
+        per_light[static_cast<std::size_t>(l)].Add(ref.data() + l * image, dec.data() + l * image, image);
+      }
+      for (const auto& e : per_light) err.Merge(e);
+    }
+    return err;
   }
 
  private:
@@ -605,27 +633,6 @@ class LpcaCompressor {
     sum_.clusters = K;
   }
 
-  // Errors in the original domain: decode slot by slot against the input, one image per task,
-  // merged in (view, light) order.
-  static ErrorStats MeasureErrors(const SlotSource& in, const Codec& codec) {
-    const int V = in.views().size(), L = in.lights().size();
-    const std::size_t image = in.image_size();
-    ErrorStats err;
-    std::vector<float> ref(in.slot_size()), dec(in.slot_size());
-    std::vector<ErrorStats> per_light(static_cast<std::size_t>(L));
-    for (int v = 0; v < V; ++v) {
-      in.ReadViewSlot(v, ref.data());
-      codec.DecodeViewSlot(v, dec.data());
-#pragma omp parallel for schedule(static)
-      for (int l = 0; l < L; ++l) {
-        per_light[static_cast<std::size_t>(l)] = ErrorStats();
-        per_light[static_cast<std::size_t>(l)].Add(ref.data() + l * image, dec.data() + l * image, image);
-      }
-      for (const auto& e : per_light) err.Merge(e);
-    }
-    return err;
-  }
-
   const SlotSource& in_;
   const CompressOptions& o_;
   const Transform& tr_;
@@ -636,8 +643,89 @@ class LpcaCompressor {
   RowMatrixXf A_;
   Eigen::VectorXd norms_;
   double total_ = 0;
+  double residual_energy_ = 0;
   std::vector<double> residual_;  // per texel: squared residual under its cluster (after Reassign)
 };
+
+// ---------------------------------------------------------------------------------------------
+// LPCA with factorised Eigen-ABRDFs (lpca_tensor.h): the LPCA above, then FactoriseLpca. With
+// --error (and no log transform) the codec's measured error is held to the target: quantisation
+// adds error the prediction leaves out, so while the measured error is above the target the
+// prediction's target is lowered by the gap (at most kTensorRounds factorisations).
+void CompressLpcaTensor(const SlotSource& in, const CompressOptions& o, const Transform& tr, Codec& codec,
+                        CompressSummary& sum, const Reporter& rep) {
+  constexpr int kTensorRounds = 4;
+  CompressOptions lo = o;
+  lo.method = CodecMethod::kLpca;
+  lo.target_error = 0, lo.retained_energy = 0, lo.max_bytes = 0;
+  Codec stage = CodecBuilder::Make(CodecMethod::kLpca, in.views(), in.lights(), in.height(), in.width(), in.channels(),
+                                   in.info(), codec.transform(), codec.log_epsilon());
+  LpcaCompressor lc(in, lo, tr, sum, rep);
+  lc.Run(stage, false);
+  const double total = lc.total_energy(), residual = lc.residual_energy();
+  sum.lpca_stage_error = total > 0 ? std::sqrt(residual / total) : 0;
+  sum.quant_bits = o.quant_bits;
+  TensorRequest q;
+  q.bits = o.quant_bits, q.target_error = o.target_error, q.max_bytes = o.max_bytes, q.growth = o.tensor_growth;
+  LpcaTensorModel& m = CodecBuilder::lpca_tensor(codec);
+  ErrorStats e;
+  bool all_kept = false;
+  for (int round = 0; round < kTensorRounds; ++round) {
+    Timer t;
+    sum.predicted_error = FactoriseLpca(stage.lpca(), in.views().size(), in.lights().size(), in.channels(), total,
+                                        residual, q, m);
+    sum.times.Add("factorise", t.Seconds());
+    t.Restart();
+    e = LpcaCompressor::MeasureErrors(in, codec);
+    sum.times.Add("evaluate", t.Seconds());
+    const double measured = e.RelativeL2().value_or(0.0);
+    rep.Info("lpca-tensor: {} terms, predicted relative error {:.6g}, measured {:.6g}", m.terms(), sum.predicted_error,
+             measured);
+    if (!(o.target_error > 0) || tr.log || measured <= o.target_error || all_kept) break;
+    const double gap = std::max(0.0, measured * measured - sum.predicted_error * sum.predicted_error);
+    const double t2 = o.target_error * o.target_error - gap;
+    // At or below the LPCA stage's error: every term (a tiny positive target keeps them all).
+    all_kept = !(t2 > residual / total);
+    q.target_error = all_kept ? 1e-150 : std::sqrt(t2);
+  }
+  if (o.target_error > 0 && !tr.log && e.RelativeL2().value_or(0.0) > o.target_error) {
+    sum.warnings.push_back(fmt::format("lpca-tensor: relative error {:.6g} above --error {} (the LPCA stage alone has "
+                                       "{:.6g}; raise --components or --clusters)",
+                                       e.RelativeL2().value_or(0.0), o.target_error, sum.lpca_stage_error));
+    rep.Warn("{}", sum.warnings.back());
+  }
+  sum.tensor_terms = static_cast<int>(m.terms());
+  FillErrors(e, sum);
+}
+
+// --bytes for pca-view, lpca, fmf, dfmf: the largest c <= options.components whose codec cannot
+// exceed the budget (sizes as Codec::StoredBytes counts them, at the unclamped c; clamping and
+// dropped components only make a codec smaller).
+int ComponentsWithin(const CompressOptions& o, const SlotSource& in) {
+  const double V = in.views().size(), L = in.lights().size(), C = in.channels(),
+               T = double(in.height()) * in.width(), D = T * C, bpv = o.storage == CodecStorage::kHalf ? 2 : 4;
+  auto bytes = [&](double c) {
+    switch (o.method) {
+      case CodecMethod::kPcaView: c = std::min(c, std::max(L - 1, 0.0)); return V * (D + c * (D + L)) * bpv;
+      case CodecMethod::kLpca: {
+        const double K = std::min<double>(o.clusters, T);
+        return (K * (c + 1) * V * L * C + T * c) * bpv + (T + K) * 4;
+      }
+      default: {
+        const double M = o.method == CodecMethod::kDfmf ? 3 : 1, rows = V * L * C / M;
+        c = std::min({c, rows, T});
+        return M * c * (rows + T + 1) * 4;
+      }
+    }
+  };
+  const double B = double(o.max_bytes);
+  if (bytes(1) > B)
+    ThrowUsage("--bytes {} is below the smallest {} codec of this input ({:.0f} bytes at 1 component)", o.max_bytes,
+               MethodName(o.method), bytes(1));
+  int c = o.components;
+  while (c > 1 && bytes(c) > B) --c;
+  return c;
+}
 
 // What the full (scene-less) input would take with the same component counts (mean per
 // slot/cluster), for the summary of a scene-reduced compression.
@@ -648,6 +736,12 @@ std::uint64_t FullCodecBytes(const CompressSummary& sum, const Codec& codec) {
   const double Vf = sum.input_views, Lf = sum.input_lights, T = double(sum.input_height) * sum.input_width,
                Cf = sum.input_channels;
   double values = 0;
+  if (codec.method() == CodecMethod::kLpcaTensor) {
+    const LpcaTensorModel& m = codec.lpca_tensor();
+    const double qb = m.bits / 8.0;
+    return static_cast<std::uint64_t>(double(m.terms()) * ((Vf + Lf * Cf) * qb + 16) + T * (m.components * qb + 4) +
+                                      double(m.clusters) * (1 + m.components) * 12);
+  }
   if (codec.method() == CodecMethod::kPcaView) {
     values = Vf * (T * Cf * (1 + cbar) + Lf * cbar);
   } else if (IsFullMatrixFactorisation(codec.method())) {
@@ -685,13 +779,18 @@ CompressSummary Compress(const CompressOptions& options, const SlotSource& input
              scene_input->height(), scene_input->channels());
   }
   const SlotSource& in = scene_input ? *scene_input : input_full;
+  if (o.max_bytes > 0 && o.method != CodecMethod::kLpcaTensor) {
+    const int c = ComponentsWithin(o, in);
+    if (c < o.components) rep.Info("--bytes {}: {} components (of at most {})", o.max_bytes, c, o.components);
+    o.components = c;
+  }
   const Transform tr{o.log_transform, o.log_epsilon};
   Codec codec = CodecBuilder::Make(o.method, in.views(), in.lights(), in.height(), in.width(), in.channels(), in.info(),
                                    o.log_transform ? ValueTransform::kLog : ValueTransform::kNone,
                                    o.log_transform ? o.log_epsilon : 0.0);
   CodecBuilder::storage(codec) = o.storage;
   sum.method = MethodName(o.method);
-  sum.storage = StorageName(o.storage);
+  sum.storage = o.method == CodecMethod::kLpcaTensor ? fmt::format("uint{}", o.quant_bits) : StorageName(o.storage);
   sum.views = in.views().size();
   sum.lights = in.lights().size();
   sum.height = in.height();
@@ -699,6 +798,8 @@ CompressSummary Compress(const CompressOptions& options, const SlotSource& input
   sum.channels = in.channels();
   if (o.method == CodecMethod::kPcaView)
     CompressPcaView(in, o, tr, codec, sum, rep);
+  else if (o.method == CodecMethod::kLpcaTensor)
+    CompressLpcaTensor(in, o, tr, codec, sum, rep);
   else if (IsFullMatrixFactorisation(o.method))
     FillErrors(CompressFmf(in, o, [&](int v, float* x, std::size_t n) { tr.Apply(in, v, x, n); }, codec, sum, rep), sum);
   else

@@ -17,14 +17,19 @@
 
 namespace btf {
 
+namespace {
+// Methods with a cluster count k (swept over SweepOptions::clusters).
+bool Clustered(const std::string& m) { return m == "lpca" || m == "lpca-tensor"; }
+}  // namespace
+
 void SweepOptions::Check() const {
   BTF_CHECK_OPTION(!methods.empty(), "methods", "name at least one method");
   for (const auto& m : methods) ParseMethod(m);  // throws (usage) for unknown names
   BTF_CHECK_OPTION(!components.empty(), "components", "give at least one component count");
   for (int c : components) BTF_CHECK_OPTION(c >= 1, "components", "every count must be >= 1");
   for (int k : clusters) BTF_CHECK_OPTION(k >= 1, "clusters", "every count must be >= 1");
-  BTF_CHECK_OPTION(std::find(methods.begin(), methods.end(), "lpca") == methods.end() || !clusters.empty(), "clusters",
-                   "lpca needs at least one cluster count");
+  BTF_CHECK_OPTION(std::none_of(methods.begin(), methods.end(), Clustered) || !clusters.empty(), "clusters",
+                   "lpca and lpca-tensor need at least one cluster count");
   BTF_CHECK_OPTION(runs >= 1 && runs <= 100, "runs", "must be 1..100");
   BTF_CHECK_OPTION(error_metric == "rel" || error_metric == "rmse", "error_metric", "must be rel or rmse");
   BTF_CHECK_OPTION(std::isfinite(render_max_rel_error) && render_max_rel_error >= 0, "render_max_rel_error",
@@ -69,7 +74,7 @@ struct OutputFolder {
 nlohmann::json Opt(const std::optional<double>& v) { return v ? nlohmann::json(*v) : nlohmann::json(nullptr); }
 
 std::string PointName(const SweepPoint& p) {
-  return p.method == "lpca" ? fmt::format("lpca_k{}_c{}", p.clusters, p.components)
+  return Clustered(p.method) ? fmt::format("{}_k{}_c{}", p.method, p.clusters, p.components)
                             : fmt::format("{}_c{}", p.method, p.components);
 }
 
@@ -99,7 +104,7 @@ SweepSummary Describe(const std::filesystem::path& dataset, const std::filesyste
 std::vector<SweepPoint> Settings(const SweepOptions& o) {
   std::vector<SweepPoint> todo;
   for (const auto& m : o.methods) {
-    const std::vector<int> ks = m == "lpca" ? o.clusters : std::vector<int>{0};
+    const std::vector<int> ks = Clustered(m) ? o.clusters : std::vector<int>{0};
     for (int k : ks)
       for (int c : o.components) {
         SweepPoint p;
@@ -247,7 +252,7 @@ Plot CostPlot(const std::vector<SweepPoint>& points, const std::string& title, c
   std::map<std::string, int> series_of;
   auto cost = [&](const SweepPoint& p) { return cost_d ? p.*cost_d : double(p.*cost_u); };
   for (const auto& p : points) {
-    const std::string key = p.method == "lpca" ? fmt::format("lpca k={}", p.clusters) : p.method;
+    const std::string key = Clustered(p.method) ? fmt::format("{} k={}", p.method, p.clusters) : p.method;
     if (!series_of.count(key)) {
       series_of[key] = int(plot.series.size());
       PlotSeries s;
@@ -461,8 +466,8 @@ void WriteResultsAndReport(const OutputFolder& out, const SweepOptions& o,
 nlohmann::json SweepPoint::ToJson() const {
   nlohmann::json j;
   j["method"] = method;
-  j["params"] = {{"components", components}, {"clusters", method == "lpca" ? nlohmann::json(clusters) : nlohmann::json(nullptr)}};
-  j["stored"] = {{"components", stored_components}, {"clusters", method == "lpca" ? nlohmann::json(stored_clusters) : nlohmann::json(nullptr)}};
+  j["params"] = {{"components", components}, {"clusters", Clustered(method) ? nlohmann::json(clusters) : nlohmann::json(nullptr)}};
+  j["stored"] = {{"components", stored_components}, {"clusters", Clustered(method) ? nlohmann::json(stored_clusters) : nlohmann::json(nullptr)}};
   j["bytes"] = bytes;
   j["file_bytes"] = file_bytes;
   j["ratio"] = ratio_float32;
@@ -485,7 +490,7 @@ std::string SweepSummary::Report() const {
                               "compress s", "decode s", error_metric, "PSNR dB", "Pareto");
   for (const auto& p : points)
     r += fmt::format("{:<22} {:>10} {:>7.1f} {:>11.4g} {:>11.4g} {:>11.4g} {:>8} {:>9}\n",
-                     p.method == "lpca" ? fmt::format("lpca k={} c={}", p.clusters, p.components)
+                     Clustered(p.method) ? fmt::format("{} k={} c={}", p.method, p.clusters, p.components)
                                         : fmt::format("{} c={}", p.method, p.components),
                      p.bytes, p.ratio_float32, p.compress_s, p.decode_s, p.error,
                      p.psnr_db ? fmt::format("{:.2f}", *p.psnr_db) : "inf",

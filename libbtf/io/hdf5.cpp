@@ -376,6 +376,12 @@ void File::WriteInts(const std::string& name, const std::vector<hsize_t>& dims, 
   WriteWhole(*this, name, dims, H5T_STD_I32LE, H5T_NATIVE_INT32, data);
 }
 
+void File::WriteCodes(const std::string& name, const std::vector<hsize_t>& dims, const std::uint16_t* data,
+                      int bits) const {
+  if (bits != 8 && bits != 16) ThrowUsage("codes of {} bits (8 or 16)", bits);
+  WriteWhole(*this, name, dims, bits == 8 ? H5T_STD_U8LE : H5T_STD_U16LE, H5T_NATIVE_UINT16, data);
+}
+
 Handle File::OpenDataset(const std::string& name) const {
   if (!Exists(name)) ThrowBadInput("'{}': required dataset '{}' is missing", path_, name);
   Handle ds(H5Dopen2(id(), name.c_str(), H5P_DEFAULT));

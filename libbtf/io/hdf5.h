@@ -83,6 +83,8 @@ class File {
   void WriteFloats(const std::string& name, const std::vector<hsize_t>& dims, const float* data,
                    Storage storage = Storage::kFloat32, const std::vector<hsize_t>& chunk = {}) const;
   void WriteInts(const std::string& name, const std::vector<hsize_t>& dims, const std::int32_t* data) const;
+  // Unsigned codes stored as 8- or 16-bit little-endian integers (bits 8: every value <= 255); read with ReadInts.
+  void WriteCodes(const std::string& name, const std::vector<hsize_t>& dims, const std::uint16_t* data, int bits) const;
   std::vector<hsize_t> Dims(const std::string& name) const;
   // Reads a whole dataset converted to the requested type (checks the element count).
   std::vector<double> ReadDoubles(const std::string& name) const;

@@ -155,6 +155,29 @@ TEST(BtfEvalCli, SweepWritesResultsPlotsAndReport) {
   EXPECT_NE(out.find(fmt::format("{:.2f}", j["points"][0]["errors"]["psnr_db"].get<double>())), std::string::npos) << out;
 }
 
+TEST(BtfEvalCli, SweepPlotsEveryCodecMethodOnOneSetOfAxes) {
+  const auto dir = test::TempDir();
+  WriteDataset(dir / "d.h5", test::MakeTestDataset(3, 4, 8, 8));
+  std::string out;
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-eval") + " sweep " + Q(dir / "d.h5") + " -o " + Q(dir / "sweep") +
+                                 " --methods pca-view,lpca,lpca-tensor,fmf --components 2 --clusters 2 --runs 1"
+                                 " --no-render --json -q",
+                             &out),
+            0);
+  const auto j = nlohmann::json::parse(out);
+  ASSERT_EQ(j["points"].size(), 4u);
+  EXPECT_EQ(j["points"][2]["method"], "lpca-tensor");
+  EXPECT_EQ(j["points"][2]["params"]["clusters"], 2);
+  EXPECT_TRUE(std::filesystem::exists(dir / "sweep" / "codecs" / "lpca-tensor_k2_c2.h5"));
+  // Every method is a series of each plot, and one Pareto front runs over all of them.
+  for (const char* plot : {"error_vs_bytes.svg", "error_vs_compress_time.svg", "error_vs_decode_time.svg"}) {
+    std::ifstream in(dir / "sweep" / plot);
+    const std::string svg((std::istreambuf_iterator<char>(in)), {});
+    for (const char* series : {"pca-view", "lpca k=2", "lpca-tensor k=2", "fmf", "Pareto front"})
+      EXPECT_NE(svg.find(series), std::string::npos) << plot << " " << series;
+  }
+}
+
 TEST(BtfEvalCli, SweepRefusesBadInputAndOptions) {
   const auto dir = test::TempDir();
   const std::string tool = test::Tool("btf-eval");

@@ -1,6 +1,6 @@
 // btf-compress: per-view PCA, local-PCA and full-matrix factorisation codecs, decoding, renderer
 // export (docs/btf-compress.md).
-//   btf-compress DATASET --method pca-view|lpca|fmf|dfmf [...] -o codec.h5
+//   btf-compress DATASET --method pca-view|lpca|lpca-tensor|fmf|dfmf [...] -o codec.h5
 //   btf-compress decode CODEC -o dataset.h5
 //   btf-compress export CODEC --format schneider -o DIR
 #include "libbtf/compress/codec.h"
@@ -75,13 +75,21 @@ int main(int argc, char** argv) {
   CompressFlags cf;
   btf::CompressOptions& co = cf.options;
   app.add_option("DATASET", cf.dataset, "Input dataset (.h5, libbtf-dataset) or Bonn .btf file");
-  app.add_option("--method", cf.method, "pca-view | lpca | fmf | dfmf (Bonn full-matrix factorisation, per YUV channel for dfmf)");
+  app.add_option("--method", cf.method, "pca-view | lpca | lpca-tensor (LPCA with factorised, quantised Eigen-ABRDFs) | fmf | dfmf (Bonn "
+                 "full-matrix factorisation, per YUV channel for dfmf)");
   app.add_option("--components,-c", co.components,
                  "Components per view slot (pca-view), per cluster (lpca) or of the SVD (fmf; per YUV channel for "
                  "dfmf); the maximum with --error/--energy");
   app.add_option("--clusters,-k", co.clusters, "LPCA clusters");
-  app.add_option("--error", co.target_error, "Target relative RMS error per slot/cluster (0 = use --components)");
+  app.add_option("--error", co.target_error, "Target relative RMS error per slot/cluster; lpca-tensor: of the whole codec (0 = use --components)");
   app.add_option("--energy", co.retained_energy, "Retained fraction of centred energy per slot/cluster (0 = off)");
+  app.add_option("--bytes", co.max_bytes,
+                 "Byte budget of the stored codec (0 = off): the smallest error within it (lpca-tensor: factor terms; "
+                 "others: the largest -c that fits)");
+  app.add_option("--quant-bits", co.quant_bits, "lpca-tensor: bits of the quantised factors and weights (8 or 16)");
+  app.add_option("--tensor-growth", co.tensor_growth,
+                 "lpca-tensor without --error/--bytes: allowed growth of the LPCA stage's squared error by dropped "
+                 "factor terms");
   app.add_option("--seed", co.seed, "Seed of k-means++ and the randomised SVD");
   app.add_flag("--log", co.log_transform, "Compress log(x + epsilon) (HDR data); recorded in the codec");
   app.add_option("--log-epsilon", co.log_epsilon, "Epsilon of --log, in data units");
