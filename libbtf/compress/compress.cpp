@@ -648,48 +648,63 @@ class LpcaCompressor {
         load[static_cast<std::size_t>(r)] += members[static_cast<std::size_t>(k)].size();
       }
     }
-    // Member rows held by other ranks are gathered first, in cluster order, then rank order (a
-    // fixed sequence of blocking transfers: no deadlock); this rank's own rows are copied when
-    // its cluster is fitted. Rows stay in texel order.
+    // Each rank fits its clusters (largest first) in waves of as many clusters as it has
+    // threads (all of them in one process): per wave, the member rows held by other ranks are
+    // gathered in (owner, cluster, sending rank) order, a fixed sequence of blocking transfers
+    // (no deadlock), and the rank's own rows are copied when its cluster is fitted. Rows stay in
+    // texel order. A rank so holds the rows of one wave's clusters at a time, not of all its
+    // clusters.
+    std::vector<std::vector<int>> owned(static_cast<std::size_t>(R_));
+    for (int k : order_k)
+      if (!members[static_cast<std::size_t>(k)].empty()) owned[static_cast<std::size_t>(owner[static_cast<std::size_t>(k)])].push_back(k);
+    std::size_t wave = 0;  // clusters per rank and wave
+    for (const auto& list : owned) wave = std::max(wave, list.size());
+    if (R_ > 1) wave = std::size_t(std::max(1, omp_get_max_threads()));
+    std::size_t waves = 0;
+    for (const auto& list : owned) waves = std::max(waves, wave ? (list.size() + wave - 1) / wave : 0);
     std::vector<RowMatrixXf> X(static_cast<std::size_t>(K_));
-    if (R_ > 1) {
-      for (int k = 0; k < K_; ++k) {
-        const auto& m = members[static_cast<std::size_t>(k)];
-        const int o = owner[static_cast<std::size_t>(k)];
-        if (m.empty() || (rank_ != o && !OwnsAny(m))) continue;
-        if (rank_ == o) X[static_cast<std::size_t>(k)].resize(static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d_));
-        for (int r = 0; r < R_; ++r) {
-          if (r == o) continue;
-          const std::size_t lo = std::size_t(std::lower_bound(m.begin(), m.end(), TexelBegin(r)) - m.begin());
-          const std::size_t hi = std::size_t(std::lower_bound(m.begin(), m.end(), TexelBegin(r + 1)) - m.begin());
-          if (lo == hi) continue;
-          if (rank_ == o) {
-            dist::Recv(r, 2, X[static_cast<std::size_t>(k)].data() + lo * d_, (hi - lo) * d_ * sizeof(float));
-          } else if (rank_ == r) {
-            RowMatrixXf rows(static_cast<Eigen::Index>(hi - lo), static_cast<Eigen::Index>(d_));
-            for (std::size_t i = lo; i < hi; ++i) rows.row(Eigen::Index(i - lo)) = A_.row(static_cast<Eigen::Index>(m[i] - t0_));
-            dist::Send(o, 2, rows.data(), std::size_t(rows.size()) * sizeof(float));
+    for (std::size_t w = 0; w < waves; ++w) {
+      for (int o = 0; o < R_ && R_ > 1; ++o) {
+        const auto& list = owned[static_cast<std::size_t>(o)];
+        for (std::size_t j = w * wave; j < std::min(list.size(), (w + 1) * wave); ++j) {
+          const int k = list[j];
+          const auto& m = members[static_cast<std::size_t>(k)];
+          if (rank_ != o && !OwnsAny(m)) continue;
+          if (rank_ == o)
+            X[static_cast<std::size_t>(k)].resize(static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d_));
+          for (int r = 0; r < R_; ++r) {
+            if (r == o) continue;
+            const std::size_t lo = std::size_t(std::lower_bound(m.begin(), m.end(), TexelBegin(r)) - m.begin());
+            const std::size_t hi = std::size_t(std::lower_bound(m.begin(), m.end(), TexelBegin(r + 1)) - m.begin());
+            if (lo == hi) continue;
+            if (rank_ == o) {
+              dist::Recv(r, 2, X[static_cast<std::size_t>(k)].data() + lo * d_, (hi - lo) * d_ * sizeof(float));
+            } else if (rank_ == r) {
+              RowMatrixXf rows(static_cast<Eigen::Index>(hi - lo), static_cast<Eigen::Index>(d_));
+              for (std::size_t i = lo; i < hi; ++i)
+                rows.row(Eigen::Index(i - lo)) = A_.row(static_cast<Eigen::Index>(m[i] - t0_));
+              dist::Send(o, 2, rows.data(), std::size_t(rows.size()) * sizeof(float));
+            }
           }
         }
       }
-    }
-    // Each cluster's PCA is computed by one thread alone (Eigen single-threaded inside the
-    // region) and the residuals are summed in cluster order: the result does not depend on
-    // which thread or rank took which cluster.
-    std::vector<int> mine;
-    for (int k : order_k)
-      if (owner[static_cast<std::size_t>(k)] == rank_ && !members[static_cast<std::size_t>(k)].empty()) mine.push_back(k);
+      // Each cluster's PCA is computed by one thread alone (Eigen single-threaded inside the
+      // region) and the residuals are summed in cluster order: the result does not depend on
+      // which thread or rank took which cluster.
+      const auto& list = owned[static_cast<std::size_t>(rank_)];
+      const std::size_t first = std::min(list.size(), w * wave), last = std::min(list.size(), (w + 1) * wave);
 #pragma omp parallel for schedule(dynamic, 1)
-    for (std::ptrdiff_t kk = 0; kk < static_cast<std::ptrdiff_t>(mine.size()); ++kk) {
-      omp_set_num_threads(1);  // Eigen sequential in this cluster's task
-      const int k = mine[static_cast<std::size_t>(kk)];
-      const auto& m = members[static_cast<std::size_t>(k)];
-      RowMatrixXf& x = X[static_cast<std::size_t>(k)];
-      if (x.rows() == 0) x.resize(static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d_));
-      for (std::size_t i = 0; i < m.size(); ++i)
-        if (m[i] >= t0_ && m[i] < t1_) x.row(Eigen::Index(i)) = A_.row(static_cast<Eigen::Index>(m[i] - t0_));
-      f.pca[static_cast<std::size_t>(k)] = Pca(x, MakeRequest(o_, std::uint64_t(k)));
-      x.resize(0, 0);
+      for (std::ptrdiff_t kk = std::ptrdiff_t(first); kk < std::ptrdiff_t(last); ++kk) {
+        omp_set_num_threads(1);  // Eigen sequential in this cluster's task
+        const int k = list[static_cast<std::size_t>(kk)];
+        const auto& m = members[static_cast<std::size_t>(k)];
+        RowMatrixXf& x = X[static_cast<std::size_t>(k)];
+        if (x.rows() == 0) x.resize(static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d_));
+        for (std::size_t i = 0; i < m.size(); ++i)
+          if (m[i] >= t0_ && m[i] < t1_) x.row(Eigen::Index(i)) = A_.row(static_cast<Eigen::Index>(m[i] - t0_));
+        f.pca[static_cast<std::size_t>(k)] = Pca(x, MakeRequest(o_, std::uint64_t(k)));
+        x.resize(0, 0);
+      }
     }
     if (R_ > 1)  // every rank gets every cluster's model (and scores, for the codec)
       for (int k = 0; k < K_; ++k) {
