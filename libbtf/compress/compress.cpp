@@ -11,6 +11,7 @@
 
 #include "libbtf/compress/codec.h"
 #include "libbtf/compress/pca.h"
+#include "libbtf/core/distributed.h"
 #include "libbtf/core/error.h"
 #include "libbtf/core/error_stats.h"
 #include "libbtf/io/slot_source.h"
@@ -162,6 +163,35 @@ ErrorStats CompressViewSlot(const SlotSource& in, int v, const std::vector<float
   return e;
 }
 
+// One view slot's decomposition and the errors of its reconstruction, as bytes (distributed runs).
+std::vector<std::uint8_t> PackSlot(const PcaViewSlot& s, const ErrorStats& e, int dropped) {
+  dist::Packer p;
+  p.Put(s.components);
+  p.Put(e);
+  p.Put(dropped);
+  p.PutVector(s.mean);
+  p.PutVector(s.basis);
+  p.PutVector(s.weights);
+  p.PutVector(s.eigenvalues);
+  return std::move(p.bytes);
+}
+
+void UnpackSlot(const std::vector<std::uint8_t>& bytes, PcaViewSlot& s, ErrorStats& e, int& dropped) {
+  dist::Unpacker u(bytes);
+  s.components = u.Get<int>();
+  e = u.Get<ErrorStats>();
+  dropped = u.Get<int>();
+  s.mean = u.GetVector<float>();
+  s.basis = u.GetVector<float>();
+  s.weights = u.GetVector<float>();
+  s.eigenvalues = u.GetVector<double>();
+}
+
+// Distributed (docs/scaling.md): each rank decomposes and reads only the view slots it owns
+// (round robin); rank 0 receives the others' slots in view order. A slot's decomposition does
+// not depend on which rank computes it, and the errors are merged in slot order, so rank 0's
+// codec and summary are those of the single-process run. The other ranks end with only their
+// own slots.
 void CompressPcaView(const SlotSource& in, const CompressOptions& o, const Transform& tr, Codec& codec,
                      CompressSummary& sum, const Reporter& rep) {
   const int V = in.views().size(), L = in.lights().size();
@@ -172,9 +202,14 @@ void CompressPcaView(const SlotSource& in, const CompressOptions& o, const Trans
     sum.warnings.push_back(fmt::format("components {} clamped to {} per view slot (lights - 1: {} light images span "
                                        "at most {} centred directions)",
                                        o.components, std::max(L - 1, 0), L, std::max(L - 1, 0)));
-    rep.Warn("{}", sum.warnings.back());
+    if (dist::Rank() == 0) rep.Warn("{}", sum.warnings.back());
   }
-  ErrorStats err;
+  std::vector<int> mine;  // the slots this rank decomposes
+  for (int v = 0; v < V; ++v)
+    if (dist::Owns(v)) mine.push_back(v);
+  const int M = static_cast<int>(mine.size());
+  std::vector<ErrorStats> slot_err(static_cast<std::size_t>(V));
+  std::vector<int> slot_dropped(static_cast<std::size_t>(V), 0);
   Timer t;
   // Slots are decomposed P at a time, one per thread (coarse-grained parallelism: no barrier
   // per small GEMM, robust when the cores are shared), while the next P slots are read on
@@ -182,45 +217,60 @@ void CompressPcaView(const SlotSource& in, const CompressOptions& o, const Trans
   const int P = std::max(1, omp_get_max_threads());
   auto read = [&](int first) {
     std::vector<std::vector<float>> batch;
-    for (int v = first; v < std::min(V, first + P); ++v) {
+    for (int i = first; i < std::min(M, first + P); ++i) {
       batch.emplace_back(n);
-      in.ReadViewSlot(v, batch.back().data());
+      in.ReadViewSlot(mine[static_cast<std::size_t>(i)], batch.back().data());
     }
     return batch;
   };
   std::future<std::vector<std::vector<float>>> next = std::async(std::launch::async, read, 0);
-  int dropped = 0;
-  for (int first = 0; first < V; first += P) {
-    rep.Progress(std::size_t(first), std::size_t(V), "pca-view");
+  for (int first = 0; first < M; first += P) {
+    rep.Progress(std::size_t(first), std::size_t(M), "pca-view");
     t.Restart();
     std::vector<std::vector<float>> raw = next.get();
-    if (first + P < V) next = std::async(std::launch::async, read, first + P);
+    if (first + P < M) next = std::async(std::launch::async, read, first + P);
     sum.times.Add("read", t.Seconds());
     t.Restart();
     const int count = static_cast<int>(raw.size());
-    std::vector<ErrorStats> errs(static_cast<std::size_t>(count));
     std::vector<std::exception_ptr> failures(static_cast<std::size_t>(count));
-    std::vector<int> drops(static_cast<std::size_t>(count), 0);
 #pragma omp parallel for schedule(static, 1) num_threads(count)
     for (int b = 0; b < count; ++b) {
-      const std::size_t i = static_cast<std::size_t>(b);
+      const std::size_t i = static_cast<std::size_t>(b), v = static_cast<std::size_t>(mine[std::size_t(first + b)]);
       omp_set_num_threads(1);  // Eigen sequential in this slot's task, also when the batch has one slot
       try {
-        errs[i] = CompressViewSlot(in, first + b, raw[i], o, tr, slots[static_cast<std::size_t>(first + b)], &drops[i]);
+        slot_err[v] = CompressViewSlot(in, int(v), raw[i], o, tr, slots[v], &slot_dropped[v]);
       } catch (...) {
         failures[i] = std::current_exception();
       }
     }
     for (const auto& f : failures)
       if (f) std::rethrow_exception(f);
-    for (int b = 0; b < count; ++b) {  // merged in slot order: sums independent of the thread count
-      err.Merge(errs[static_cast<std::size_t>(b)]);
-      dropped += drops[static_cast<std::size_t>(b)];
-      sum.slot_components.push_back(slots[static_cast<std::size_t>(first + b)].components);
-    }
     sum.times.Add("decompose", t.Seconds());
   }
-  rep.Progress(std::size_t(V), std::size_t(V), "pca-view");
+  if (M == 0) next.get();
+  rep.Progress(std::size_t(M), std::size_t(M), "pca-view");
+  if (dist::Distributed()) {
+    t.Restart();
+    for (int v = 0; v < V; ++v) {
+      const int owner = dist::Owner(v);
+      if (owner == 0) continue;
+      const std::size_t i = static_cast<std::size_t>(v);
+      if (dist::Rank() == owner) {
+        dist::SendBytes(0, v, PackSlot(slots[i], slot_err[i], slot_dropped[i]));
+        slots[i] = PcaViewSlot{};
+      } else if (dist::Rank() == 0) {
+        UnpackSlot(dist::RecvBytes(owner, v), slots[i], slot_err[i], slot_dropped[i]);
+      }
+    }
+    sum.times.Add("gather", t.Seconds());
+  }
+  ErrorStats err;
+  int dropped = 0;
+  for (int v = 0; v < V; ++v) {  // merged in slot order: sums independent of thread and rank counts
+    err.Merge(slot_err[static_cast<std::size_t>(v)]);
+    dropped += slot_dropped[static_cast<std::size_t>(v)];
+    sum.slot_components.push_back(slots[static_cast<std::size_t>(v)].components);
+  }
   if (dropped > 0) {
     sum.warnings.push_back(fmt::format("{} components with ~0 eigenvalue dropped (rank-deficient or constant slots)", dropped));
     rep.Info("{}", sum.warnings.back());
@@ -237,13 +287,21 @@ struct ClusterFit {
   double error = 0;                     // relative error (transformed domain)
 };
 
+// Distributed (docs/scaling.md): rank r owns a contiguous range of whole kRows texel blocks and
+// reads, holds and reassigns only those texels; vectors of one value per texel (assignment,
+// residual, norm) are shared by every rank. The k-means sample's rows are gathered on rank 0,
+// which seeds and runs Lloyd as one process would and broadcasts the centers. Per round, each
+// cluster's member rows are gathered in texel order on the rank that fits it, its PCA is
+// computed there exactly as in one process and broadcast. Every sum keeps its single-process
+// order, and every GEMM block its rows, so the codec is bit-identical for any number of ranks.
 class LpcaCompressor {
  public:
   LpcaCompressor(const SlotSource& in, const CompressOptions& o, const Transform& tr, CompressSummary& sum,
                  const Reporter& rep)
       : in_(in), o_(o), tr_(tr), sum_(sum), rep_(rep),
         N_(std::size_t(in.height()) * in.width()),
-        d_(std::size_t(in.views().size()) * in.lights().size() * in.channels()) {}
+        d_(std::size_t(in.views().size()) * in.lights().size() * in.channels()),
+        R_(dist::Size()), rank_(dist::Rank()), t0_(TexelBegin(rank_)), t1_(TexelBegin(rank_ + 1)) {}
 
   // measure = false: no error pass (lpca-tensor measures its own codec).
   void Run(Codec& codec, bool measure = true) {
@@ -256,6 +314,7 @@ class LpcaCompressor {
     t.Restart();
     Iterate(fit);
     sum_.times.Add("iterate", t.Seconds());
+    A_.resize(0, 0);  // the evaluation decodes the codec; the texel matrix is no longer needed
     StoreModel(fit, codec);
     residual_energy_ = fit.error * fit.error * total_;
     if (!measure) return;
@@ -269,23 +328,34 @@ class LpcaCompressor {
   double residual_energy() const { return residual_energy_; }
 
   // Errors in the original domain: decode slot by slot against the input, one image per task,
-  // merged in (view, light) order.
+  // merged in (view, light) order. Distributed, each rank decodes and reads the view slots it
+  // owns (round robin) and every rank merges every image's sums in the same order.
   static ErrorStats MeasureErrors(const SlotSource& in, const Codec& codec) {
     const int V = in.views().size(), L = in.lights().size();
     const std::size_t image = in.image_size();
-    ErrorStats err;
+    std::vector<ErrorStats> per_image(std::size_t(V) * L);
     std::vector<float> ref(in.slot_size()), dec(in.slot_size());
-    std::vector<ErrorStats> per_light(static_cast<std::size_t>(L));
     for (int v = 0; v < V; ++v) {
+      if (!dist::Owns(v)) continue;
       in.ReadViewSlot(v, ref.data());
       codec.DecodeViewSlot(v, dec.data());
 #pragma omp parallel for schedule(static)
-      for (int l = 0; l < L; ++l) {
-        per_light[static_cast<std::size_t>(l)] = ErrorStats();
-        per_light[static_cast<std::size_t>(l)].Add(ref.data() + l * image, dec.data() + l * image, image);
-      }
-      for (const auto& e : per_light) err.Merge(e);
+      for (int l = 0; l < L; ++l)
+        per_image[std::size_t(v) * L + l].Add(ref.data() + l * image, dec.data() + l * image, image);
     }
+    if (dist::Distributed()) {
+      std::vector<ErrorStats> mine;
+      for (int v = dist::Rank(); v < V; v += dist::Size())
+        mine.insert(mine.end(), per_image.begin() + std::ptrdiff_t(v) * L, per_image.begin() + std::ptrdiff_t(v + 1) * L);
+      const std::vector<ErrorStats> all = dist::AllGatherConcat(mine);
+      std::size_t at = 0;
+      for (int r = 0; r < dist::Size(); ++r)
+        for (int v = r; v < V; v += dist::Size())
+          for (int l = 0; l < L; ++l) per_image[std::size_t(v) * L + l] = all[at++];
+      BTF_CHECK(at == all.size());
+    }
+    ErrorStats err;
+    for (const auto& e : per_image) err.Merge(e);
     return err;
   }
 
@@ -295,11 +365,26 @@ class LpcaCompressor {
   static constexpr int kLloydRounds = 100;       // k-means rounds at most
   static constexpr double kLloydTolerance = 1e-5;  // stop when the objective improves by less (relative)
 
-  // Texel-major matrix A (N x d, row = one texel's ABRDF), transformed; texel norms.
+  // First texel of rank r's range (whole blocks, ranges contiguous in rank order).
+  std::size_t TexelBegin(int r) const {
+    const std::size_t blocks = (N_ + kRows - 1) / kRows;
+    return std::min(N_, blocks * std::size_t(r) / std::size_t(R_) * kRows);
+  }
+  std::size_t local() const { return t1_ - t0_; }
+  void Warn(const std::string& w) const {
+    sum_.warnings.push_back(w);
+    if (rank_ == 0) rep_.Warn("{}", w);  // the same on every rank: reported once
+  }
+
+  // Texel-major matrix A (this rank's texels x d, row = one texel's ABRDF), transformed; texel
+  // norms (of every texel, on every rank).
   void ReadTexelMajor() {
     const int V = in_.views().size(), L = in_.lights().size(), C = in_.channels();
-    CheckAllocation(4.0 * double(N_) * double(d_), fmt::format("texel-major copy of '{}' for LPCA", in_.name()));
-    A_.resize(static_cast<Eigen::Index>(N_), static_cast<Eigen::Index>(d_));
+    CheckAllocation(4.0 * double(local()) * double(d_),
+                    R_ > 1 ? fmt::format("texel-major copy of '{}' for LPCA (texels {}-{} of {} on this rank)", in_.name(),
+                                         t0_, t1_, N_)
+                           : fmt::format("texel-major copy of '{}' for LPCA", in_.name()));
+    A_.resize(static_cast<Eigen::Index>(local()), static_cast<Eigen::Index>(d_));
     std::vector<float> slot(in_.slot_size());
     for (int v = 0; v < V; ++v) {
       rep_.Progress(std::size_t(v), std::size_t(V), "read");
@@ -307,13 +392,16 @@ class LpcaCompressor {
       CheckFiniteSlot(in_, v, slot.data());
       tr_.Apply(in_, v, slot.data(), slot.size());
 #pragma omp parallel for schedule(static)
-      for (std::ptrdiff_t ti = 0; ti < static_cast<std::ptrdiff_t>(N_); ++ti)
+      for (std::ptrdiff_t ti = 0; ti < static_cast<std::ptrdiff_t>(local()); ++ti)
         for (int l = 0; l < L; ++l)
           for (int c = 0; c < C; ++c)
-            A_(ti, (std::ptrdiff_t(v) * L + l) * C + c) = slot[(std::size_t(l) * N_ + std::size_t(ti)) * C + c];
+            A_(ti, (std::ptrdiff_t(v) * L + l) * C + c) = slot[(std::size_t(l) * N_ + t0_ + std::size_t(ti)) * C + c];
     }
-    norms_.resize(static_cast<Eigen::Index>(N_));
-    for (Eigen::Index i = 0; i < A_.rows(); ++i) norms_[i] = A_.row(i).cast<double>().squaredNorm();
+    std::vector<double> mine(local());
+    for (Eigen::Index i = 0; i < A_.rows(); ++i) mine[std::size_t(i)] = A_.row(i).cast<double>().squaredNorm();
+    const std::vector<double> all = R_ > 1 ? dist::AllGatherConcat(mine) : mine;
+    BTF_CHECK(all.size() == N_);
+    norms_ = Eigen::Map<const Eigen::VectorXd>(all.data(), static_cast<Eigen::Index>(N_));
     total_ = norms_.sum();
     residual_.assign(N_, 0.0);
   }
@@ -332,20 +420,20 @@ class LpcaCompressor {
     }
   }
 
-  // For texels rows[0..m) (all texels in order when rows is null): the nearest center (squared
-  // Euclidean distance, the lower index on ties) and that distance.
-  void NearestCenters(const RowMatrixXf& centers, const std::size_t* rows, std::size_t m, std::int32_t* assign,
-                      double* dist) const {
+  // For rows rows[0..m) of M (rows 0..m-1 when rows is null): the nearest center (squared
+  // Euclidean distance, the lower index on ties) and that distance (norms: of M's rows).
+  static void NearestCenters(const RowMatrixXf& M, const double* norms, const RowMatrixXf& centers,
+                             const std::size_t* rows, std::size_t m, std::int32_t* assign, double* dist) {
     const Eigen::VectorXd cn = centers.cast<double>().rowwise().squaredNorm();
     ForBlocks(m, [&](std::size_t first, std::size_t count) {
       const Eigen::Index w = static_cast<Eigen::Index>(count);
       Eigen::MatrixXf P;
       if (rows) {
-        RowMatrixXf X(w, A_.cols());
-        for (Eigen::Index i = 0; i < w; ++i) X.row(i) = A_.row(static_cast<Eigen::Index>(rows[first + std::size_t(i)]));
+        RowMatrixXf X(w, M.cols());
+        for (Eigen::Index i = 0; i < w; ++i) X.row(i) = M.row(static_cast<Eigen::Index>(rows[first + std::size_t(i)]));
         P.noalias() = X * centers.transpose();
       } else {
-        P.noalias() = A_.middleRows(static_cast<Eigen::Index>(first), w) * centers.transpose();
+        P.noalias() = M.middleRows(static_cast<Eigen::Index>(first), w) * centers.transpose();
       }
       for (Eigen::Index i = 0; i < w; ++i) {
         const std::size_t t = rows ? rows[first + std::size_t(i)] : first + std::size_t(i);
@@ -356,7 +444,7 @@ class LpcaCompressor {
           if (e < best) best = e, arg = static_cast<int>(k);
         }
         assign[first + std::size_t(i)] = arg;
-        if (dist) dist[first + std::size_t(i)] = std::max(0.0, best + norms_[static_cast<Eigen::Index>(t)]);
+        if (dist) dist[first + std::size_t(i)] = std::max(0.0, best + norms[t]);
       }
     });
   }
@@ -373,6 +461,31 @@ class LpcaCompressor {
     return sample;
   }
 
+  // The rows of the sample texels, in sample order, on rank 0 (the sample is sorted and the
+  // ranks' ranges contiguous: each rank's sample rows are one run of the sample).
+  RowMatrixXf GatherSampleRows(const std::vector<std::size_t>& sample) const {
+    const auto lo = std::lower_bound(sample.begin(), sample.end(), t0_) - sample.begin();
+    const auto hi = std::lower_bound(sample.begin(), sample.end(), t1_) - sample.begin();
+    RowMatrixXf S;
+    if (rank_ == 0) {
+      CheckAllocation(4.0 * double(sample.size()) * double(d_), fmt::format("k-means sample of '{}' on rank 0", in_.name()));
+      S.resize(static_cast<Eigen::Index>(sample.size()), static_cast<Eigen::Index>(d_));
+      for (auto i = lo; i < hi; ++i) S.row(i) = A_.row(static_cast<Eigen::Index>(sample[std::size_t(i)] - t0_));
+      std::size_t at = std::size_t(hi);
+      for (int r = 1; r < R_; ++r) {
+        const std::size_t end = std::size_t(
+            std::lower_bound(sample.begin(), sample.end(), TexelBegin(r + 1)) - sample.begin());
+        dist::Recv(r, 1, S.data() + at * d_, (end - at) * d_ * sizeof(float));
+        at = end;
+      }
+    } else {
+      RowMatrixXf mine(hi - lo, static_cast<Eigen::Index>(d_));
+      for (auto i = lo; i < hi; ++i) mine.row(i - lo) = A_.row(static_cast<Eigen::Index>(sample[std::size_t(i)] - t0_));
+      dist::Send(0, 1, mine.data(), std::size_t(mine.size()) * sizeof(float));
+    }
+    return S;
+  }
+
   // k-means on a sample: k-means++ seeds, then Lloyd rounds (means in double, summed in sample
   // order) until no sample texel moves, the k-means objective improves by less than
   // kLloydTolerance (relative) or kLloydRounds; every texel then goes to its nearest center, and
@@ -380,31 +493,33 @@ class LpcaCompressor {
   ClusterFit InitialClustering() {
     K_ = o_.clusters;
     if (std::size_t(K_) > N_) {
-      sum_.warnings.push_back(fmt::format("clusters {} clamped to the number of texels {}", K_, N_));
-      rep_.Warn("{}", sum_.warnings.back());
+      Warn(fmt::format("clusters {} clamped to the number of texels {}", K_, N_));
       K_ = static_cast<int>(N_);
     }
     std::mt19937_64 rng(o_.seed);
     const std::vector<std::size_t> sample = Sample(rng);
-    RowMatrixXf centers = SeedCenters(sample, rng);
     const std::size_t S = sample.size();
-    std::vector<std::int32_t> assign(S, -1), next(S);
-    std::vector<double> dist(S);
-    double objective = std::numeric_limits<double>::infinity();
+    RowMatrixXf centers(K_, static_cast<Eigen::Index>(d_));
     int rounds = 0;
-    for (; rounds < kLloydRounds; ++rounds) {
-      NearestCenters(centers, sample.data(), S, next.data(), dist.data());
-      const bool moved = next != assign;
-      assign.swap(next);
-      double obj = 0;
-      for (double e : dist) obj += e;
-      if (!moved || !(objective - obj > kLloydTolerance * obj)) break;
-      objective = obj;
-      UpdateMeans(sample, assign, dist, centers);
+    if (R_ == 1) {
+      rounds = Lloyd(A_, norms_.data(), sample, rng, centers);
+    } else {
+      const RowMatrixXf rows = GatherSampleRows(sample);
+      if (rank_ == 0) {
+        std::vector<std::size_t> index(S);
+        std::iota(index.begin(), index.end(), std::size_t(0));
+        std::vector<double> norms(S);
+        for (std::size_t i = 0; i < S; ++i) norms[i] = norms_[static_cast<Eigen::Index>(sample[i])];
+        rounds = Lloyd(rows, norms.data(), index, rng, centers);
+      }
+      dist::Broadcast(0, centers.data(), std::size_t(centers.size()) * sizeof(float));
+      dist::Broadcast(0, &rounds, sizeof rounds);
     }
     ClusterFit fit;
-    fit.assign.assign(N_, 0);
-    NearestCenters(centers, nullptr, N_, fit.assign.data(), nullptr);
+    std::vector<std::int32_t> mine(local());
+    NearestCenters(A_, nullptr, centers, nullptr, local(), mine.data(), nullptr);
+    fit.assign = R_ > 1 ? dist::AllGatherConcat(mine) : std::move(mine);
+    BTF_CHECK(fit.assign.size() == N_);
     FitClusters(fit, false);
     sum_.iteration_errors.push_back(fit.error);
     sum_.iteration_changes.push_back(0);
@@ -412,10 +527,32 @@ class LpcaCompressor {
     return fit;
   }
 
+  // Seeds and Lloyd rounds on the rows `sample` of M (norms: of M's rows); returns the rounds.
+  int Lloyd(const RowMatrixXf& M, const double* norms, const std::vector<std::size_t>& sample, std::mt19937_64& rng,
+            RowMatrixXf& centers) const {
+    centers = SeedCenters(M, sample, rng);
+    const std::size_t S = sample.size();
+    std::vector<std::int32_t> assign(S, -1), next(S);
+    std::vector<double> dist(S);
+    double objective = std::numeric_limits<double>::infinity();
+    int rounds = 0;
+    for (; rounds < kLloydRounds; ++rounds) {
+      NearestCenters(M, norms, centers, sample.data(), S, next.data(), dist.data());
+      const bool moved = next != assign;
+      assign.swap(next);
+      double obj = 0;
+      for (double e : dist) obj += e;
+      if (!moved || !(objective - obj > kLloydTolerance * obj)) break;
+      objective = obj;
+      UpdateMeans(M, sample, assign, dist, centers);
+    }
+    return rounds;
+  }
+
   // Lloyd's update: each center the mean of its sample texels (double, in sample order, columns
   // split statically); an empty cluster takes the farthest sample texel of a cluster that can
   // spare one.
-  void UpdateMeans(const std::vector<std::size_t>& sample, std::vector<std::int32_t>& assign,
+  void UpdateMeans(const RowMatrixXf& M, const std::vector<std::size_t>& sample, std::vector<std::int32_t>& assign,
                    const std::vector<double>& dist, RowMatrixXf& centers) const {
     const std::size_t S = sample.size();
     std::vector<std::size_t> count(static_cast<std::size_t>(K_), 0);
@@ -436,7 +573,7 @@ class LpcaCompressor {
           break;
         }
     }
-    const Eigen::Index d = A_.cols();
+    const Eigen::Index d = M.cols();
     constexpr Eigen::Index kCols = 512;
     const std::ptrdiff_t chunks = static_cast<std::ptrdiff_t>((d + kCols - 1) / kCols);
 #pragma omp parallel for schedule(static)
@@ -444,7 +581,7 @@ class LpcaCompressor {
       const Eigen::Index c0 = ch * kCols, w = std::min(kCols, d - c0);
       Eigen::MatrixXd sums = Eigen::MatrixXd::Zero(K_, w);
       for (std::size_t i = 0; i < S; ++i)
-        sums.row(assign[i]) += A_.row(static_cast<Eigen::Index>(sample[i])).segment(c0, w).cast<double>();
+        sums.row(assign[i]) += M.row(static_cast<Eigen::Index>(sample[i])).segment(c0, w).cast<double>();
       for (int k = 0; k < K_; ++k)
         if (count[static_cast<std::size_t>(k)] > 0)
           centers.row(k).segment(c0, w) = (sums.row(k) / double(count[static_cast<std::size_t>(k)])).cast<float>();
@@ -452,15 +589,15 @@ class LpcaCompressor {
   }
 
   // k-means++ seeds (D^2 sampling) on the sample.
-  RowMatrixXf SeedCenters(const std::vector<std::size_t>& sample, std::mt19937_64& rng) {
+  RowMatrixXf SeedCenters(const RowMatrixXf& M, const std::vector<std::size_t>& sample, std::mt19937_64& rng) const {
     RowMatrixXf centers(K_, static_cast<Eigen::Index>(d_));
     std::vector<double> dist(sample.size(), std::numeric_limits<double>::infinity());
     std::size_t pick = sample[std::uniform_int_distribution<std::size_t>(0, sample.size() - 1)(rng)];
     for (int k = 0; k < K_; ++k) {
-      centers.row(k) = A_.row(static_cast<Eigen::Index>(pick));
+      centers.row(k) = M.row(static_cast<Eigen::Index>(pick));
 #pragma omp parallel for schedule(static)
       for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(sample.size()); ++i)
-        dist[i] = std::min(dist[i], (A_.row(static_cast<Eigen::Index>(sample[i])) - centers.row(k)).cast<double>().squaredNorm());
+        dist[i] = std::min(dist[i], (M.row(static_cast<Eigen::Index>(sample[i])) - centers.row(k)).cast<double>().squaredNorm());
       const double s = std::accumulate(dist.begin(), dist.end(), 0.0);
       if (!(s > 0)) {  // fewer distinct ABRDFs than clusters: duplicate centers (clusters stay empty, re-seeded)
         pick = sample[std::size_t(k + 1) % sample.size()];
@@ -475,6 +612,39 @@ class LpcaCompressor {
       pick = sample[i];
     }
     return centers;
+  }
+
+  // A cluster's PCA as bytes: the model every rank needs, and the member scores for the codec.
+  static std::vector<std::uint8_t> PackPca(const PcaResult& p) {
+    dist::Packer b;
+    for (int x : {p.requested, p.clamped_to, p.dropped_null, int(p.randomized)}) b.Put(x);
+    for (double x : {p.total_energy, p.centered_energy, p.residual_energy}) b.Put(x);
+    for (Eigen::Index x : {p.basis.rows(), p.basis.cols(), p.scores.rows(), p.scores.cols()}) b.Put(std::int64_t(x));
+    b.PutVector(p.eigenvalues);
+    b.PutVector(p.mean.data(), std::size_t(p.mean.size()));
+    b.PutVector(p.basis.data(), std::size_t(p.basis.size()));
+    b.PutVector(p.scores.data(), std::size_t(p.scores.size()));
+    return std::move(b.bytes);
+  }
+  static PcaResult UnpackPca(const std::vector<std::uint8_t>& bytes) {
+    dist::Unpacker u(bytes);
+    PcaResult p;
+    p.requested = u.Get<int>();
+    p.clamped_to = u.Get<int>();
+    p.dropped_null = u.Get<int>();
+    p.randomized = u.Get<int>() != 0;
+    p.total_energy = u.Get<double>();
+    p.centered_energy = u.Get<double>();
+    p.residual_energy = u.Get<double>();
+    const auto br = u.Get<std::int64_t>(), bc = u.Get<std::int64_t>(), sr = u.Get<std::int64_t>(), sc = u.Get<std::int64_t>();
+    p.eigenvalues = u.GetVector<double>();
+    const std::vector<float> mean = u.GetVector<float>();
+    p.mean = Eigen::Map<const Eigen::VectorXf>(mean.data(), static_cast<Eigen::Index>(mean.size()));
+    p.basis.resize(br, bc);
+    u.GetVectorInto(p.basis.data(), std::size_t(br * bc));
+    p.scores.resize(sr, sc);
+    u.GetVectorInto(p.scores.data(), std::size_t(sr * sc));
+    return p;
   }
 
   // Per-cluster PCA on the current assignment; empty clusters re-seeded from the worst texels.
@@ -501,28 +671,97 @@ class LpcaCompressor {
       members[static_cast<std::size_t>(k)].push_back(i);
     }
     f.pca.assign(static_cast<std::size_t>(K_), PcaResult{});
-    // One cluster per thread (Eigen runs single-threaded inside a parallel region), largest first.
+    // Largest first (one cluster per thread, Eigen single-threaded inside the region).
     std::vector<int> order_k(static_cast<std::size_t>(K_));
     std::iota(order_k.begin(), order_k.end(), 0);
     std::stable_sort(order_k.begin(), order_k.end(), [&](int a, int b) {
       return members[static_cast<std::size_t>(a)].size() > members[static_cast<std::size_t>(b)].size();
     });
-    // Each cluster's PCA is computed by one thread alone (Eigen single-threaded inside the
-    // region) and the residuals are summed in cluster order: the result does not depend on
-    // which thread took which cluster.
-#pragma omp parallel for schedule(dynamic, 1)
-    for (int kk = 0; kk < K_; ++kk) {
-      omp_set_num_threads(1);  // Eigen sequential in this cluster's task
-      const int k = order_k[static_cast<std::size_t>(kk)];
-      const auto& m = members[static_cast<std::size_t>(k)];
-      if (m.empty()) continue;
-      RowMatrixXf X(static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d_));
-      for (std::size_t i = 0; i < m.size(); ++i) X.row(Eigen::Index(i)) = A_.row(static_cast<Eigen::Index>(m[i]));
-      f.pca[static_cast<std::size_t>(k)] = Pca(X, MakeRequest(o_, std::uint64_t(k)));
+    // The rank that fits each cluster: the least loaded so far (in texels), largest first.
+    std::vector<int> owner(static_cast<std::size_t>(K_), 0);
+    if (R_ > 1) {
+      std::vector<std::size_t> load(static_cast<std::size_t>(R_), 0);
+      for (int k : order_k) {
+        const int r = static_cast<int>(std::min_element(load.begin(), load.end()) - load.begin());
+        owner[static_cast<std::size_t>(k)] = r;
+        load[static_cast<std::size_t>(r)] += members[static_cast<std::size_t>(k)].size();
+      }
     }
+    // Each rank fits its clusters (largest first) in waves of as many clusters as it has
+    // threads (all of them in one process): per wave, the member rows held by other ranks are
+    // gathered in (owner, cluster, sending rank) order, a fixed sequence of blocking transfers
+    // (no deadlock), and the rank's own rows are copied when its cluster is fitted. Rows stay in
+    // texel order. A rank so holds the rows of one wave's clusters at a time, not of all its
+    // clusters.
+    std::vector<std::vector<int>> owned(static_cast<std::size_t>(R_));
+    for (int k : order_k)
+      if (!members[static_cast<std::size_t>(k)].empty()) owned[static_cast<std::size_t>(owner[static_cast<std::size_t>(k)])].push_back(k);
+    std::size_t wave = 0;  // clusters per rank and wave
+    for (const auto& list : owned) wave = std::max(wave, list.size());
+    if (R_ > 1) wave = std::size_t(std::max(1, omp_get_max_threads()));
+    std::size_t waves = 0;
+    for (const auto& list : owned) waves = std::max(waves, wave ? (list.size() + wave - 1) / wave : 0);
+    std::vector<RowMatrixXf> X(static_cast<std::size_t>(K_));
+    for (std::size_t w = 0; w < waves; ++w) {
+      for (int o = 0; o < R_ && R_ > 1; ++o) {
+        const auto& list = owned[static_cast<std::size_t>(o)];
+        for (std::size_t j = w * wave; j < std::min(list.size(), (w + 1) * wave); ++j) {
+          const int k = list[j];
+          const auto& m = members[static_cast<std::size_t>(k)];
+          if (rank_ != o && !OwnsAny(m)) continue;
+          if (rank_ == o)
+            X[static_cast<std::size_t>(k)].resize(static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d_));
+          for (int r = 0; r < R_; ++r) {
+            if (r == o) continue;
+            const std::size_t lo = std::size_t(std::lower_bound(m.begin(), m.end(), TexelBegin(r)) - m.begin());
+            const std::size_t hi = std::size_t(std::lower_bound(m.begin(), m.end(), TexelBegin(r + 1)) - m.begin());
+            if (lo == hi) continue;
+            if (rank_ == o) {
+              dist::Recv(r, 2, X[static_cast<std::size_t>(k)].data() + lo * d_, (hi - lo) * d_ * sizeof(float));
+            } else if (rank_ == r) {
+              RowMatrixXf rows(static_cast<Eigen::Index>(hi - lo), static_cast<Eigen::Index>(d_));
+              for (std::size_t i = lo; i < hi; ++i)
+                rows.row(Eigen::Index(i - lo)) = A_.row(static_cast<Eigen::Index>(m[i] - t0_));
+              dist::Send(o, 2, rows.data(), std::size_t(rows.size()) * sizeof(float));
+            }
+          }
+        }
+      }
+      // Each cluster's PCA is computed by one thread alone (Eigen single-threaded inside the
+      // region) and the residuals are summed in cluster order: the result does not depend on
+      // which thread or rank took which cluster.
+      const auto& list = owned[static_cast<std::size_t>(rank_)];
+      const std::size_t first = std::min(list.size(), w * wave), last = std::min(list.size(), (w + 1) * wave);
+#pragma omp parallel for schedule(dynamic, 1)
+      for (std::ptrdiff_t kk = std::ptrdiff_t(first); kk < std::ptrdiff_t(last); ++kk) {
+        omp_set_num_threads(1);  // Eigen sequential in this cluster's task
+        const int k = list[static_cast<std::size_t>(kk)];
+        const auto& m = members[static_cast<std::size_t>(k)];
+        RowMatrixXf& x = X[static_cast<std::size_t>(k)];
+        if (x.rows() == 0) x.resize(static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d_));
+        for (std::size_t i = 0; i < m.size(); ++i)
+          if (m[i] >= t0_ && m[i] < t1_) x.row(Eigen::Index(i)) = A_.row(static_cast<Eigen::Index>(m[i] - t0_));
+        f.pca[static_cast<std::size_t>(k)] = Pca(x, MakeRequest(o_, std::uint64_t(k)));
+        x.resize(0, 0);
+      }
+    }
+    if (R_ > 1)  // every rank gets every cluster's model (and scores, for the codec)
+      for (int k = 0; k < K_; ++k) {
+        if (members[static_cast<std::size_t>(k)].empty()) continue;
+        const int o = owner[static_cast<std::size_t>(k)];
+        auto bytes = dist::BroadcastBytes(o, rank_ == o ? PackPca(f.pca[static_cast<std::size_t>(k)])
+                                                        : std::vector<std::uint8_t>());
+        if (rank_ != o) f.pca[static_cast<std::size_t>(k)] = UnpackPca(bytes);
+      }
     double res = 0;
     for (const PcaResult& p : f.pca) res += p.residual_energy;
     f.error = total_ > 0 ? std::sqrt(res / total_) : 0;
+  }
+
+  // Whether this rank holds any of these (sorted) texels.
+  bool OwnsAny(const std::vector<std::size_t>& texels) const {
+    const auto it = std::lower_bound(texels.begin(), texels.end(), t0_);
+    return it != texels.end() && *it < t1_;
   }
 
   // Reassigns each texel to the cluster that reconstructs it best; returns the number moved.
@@ -545,12 +784,12 @@ class LpcaCompressor {
     for (int k = 0; k < K; ++k)
       for (int j = 0; j < std::max(ck[static_cast<std::size_t>(k)], 0); ++j)
         me(k, j) = big.row(k).cast<double>().dot(big.row(K + Eigen::Index(k) * c + j).cast<double>());
-    std::vector<std::uint8_t> changed(N_, 0);
-    ForBlocks(N_, [&](std::size_t b, std::size_t count) {
+    std::vector<std::uint8_t> changed(local(), 0);
+    ForBlocks(local(), [&](std::size_t b, std::size_t count) {
       const Eigen::Index w = static_cast<Eigen::Index>(count);
       const Eigen::MatrixXf P = A_.middleRows(static_cast<Eigen::Index>(b), w) * big.transpose();
       for (Eigen::Index i = 0; i < w; ++i) {
-        const std::size_t ti = b + static_cast<std::size_t>(i);
+        const std::size_t ti = t0_ + b + static_cast<std::size_t>(i);
         double best = std::numeric_limits<double>::infinity();
         int arg = assign[ti];
         for (int k = 0; k < K; ++k) {
@@ -563,12 +802,25 @@ class LpcaCompressor {
           if (r < best) best = r, arg = k;
         }
         residual_[ti] = std::max(best, 0.0);
-        changed[ti] = arg != assign[ti];
+        changed[ti - t0_] = arg != assign[ti];
         assign[ti] = arg;
       }
     });
-    const std::size_t moved = std::accumulate(changed.begin(), changed.end(), std::size_t(0));
-    return moved;
+    std::uint64_t moved = std::accumulate(changed.begin(), changed.end(), std::uint64_t(0));
+    if (R_ > 1) {  // share this rank's texels' assignments and residuals
+      const std::vector<std::int32_t> a =
+          dist::AllGatherConcat(std::vector<std::int32_t>(assign.begin() + std::ptrdiff_t(t0_), assign.begin() + std::ptrdiff_t(t1_)));
+      const std::vector<double> r = dist::AllGatherConcat(
+          std::vector<double>(residual_.begin() + std::ptrdiff_t(t0_), residual_.begin() + std::ptrdiff_t(t1_)));
+      BTF_CHECK(a.size() == N_ && r.size() == N_);
+      assign = a;
+      residual_ = r;
+      moved = 0;
+      for (std::uint64_t m : dist::AllGatherConcat(std::vector<std::uint64_t>{std::accumulate(
+               changed.begin(), changed.end(), std::uint64_t(0))}))
+        moved += m;
+    }
+    return static_cast<std::size_t>(moved);
   }
 
   // PCA/reassignment rounds until nothing moves, the error stops improving or max_iterations.
@@ -624,11 +876,9 @@ class LpcaCompressor {
     if (o_.storage == CodecStorage::kHalf)
       for (auto* a : {&m.means, &m.basis, &m.weights})
         for (float& x : *a) x = RoundToHalf(x);
-    if (small > 0) {
-      sum_.warnings.push_back(fmt::format("{} clusters have too few texels for {} components (clamped to members - 1)",
-                                          small, o_.components));
-      rep_.Warn("{}", sum_.warnings.back());
-    }
+    if (small > 0)
+      Warn(fmt::format("{} clusters have too few texels for {} components (clamped to members - 1)", small,
+                       o_.components));
     if (dropped > 0) sum_.warnings.push_back(fmt::format("{} components with ~0 eigenvalue dropped", dropped));
     sum_.clusters = K;
   }
@@ -639,12 +889,14 @@ class LpcaCompressor {
   CompressSummary& sum_;
   const Reporter& rep_;
   const std::size_t N_, d_;
+  const int R_, rank_;          // ranks, this rank
+  const std::size_t t0_, t1_;   // this rank's texels [t0_, t1_)
   int K_ = 0;
-  RowMatrixXf A_;
-  Eigen::VectorXd norms_;
+  RowMatrixXf A_;               // this rank's texels' rows
+  Eigen::VectorXd norms_;       // every texel's squared norm
   double total_ = 0;
   double residual_energy_ = 0;
-  std::vector<double> residual_;  // per texel: squared residual under its cluster (after Reassign)
+  std::vector<double> residual_;  // every texel's squared residual under its cluster (after Reassign)
 };
 
 // ---------------------------------------------------------------------------------------------

@@ -98,6 +98,52 @@ void Recv(int from, int tag, void* data, std::size_t bytes) {
 #endif
 }
 
+void SendBytes(int to, int tag, const std::vector<std::uint8_t>& bytes) {
+  const std::uint64_t n = bytes.size();
+  Send(to, tag, &n, sizeof n);
+  Send(to, tag, bytes.data(), bytes.size());
+}
+
+std::vector<std::uint8_t> RecvBytes(int from, int tag) {
+  std::uint64_t n = 0;
+  Recv(from, tag, &n, sizeof n);
+  std::vector<std::uint8_t> bytes(static_cast<std::size_t>(n));
+  Recv(from, tag, bytes.data(), bytes.size());
+  return bytes;
+}
+
+void Broadcast(int root, void* data, std::size_t bytes) {
+#ifdef BTF_HAVE_MPI
+  if (!g_started) return;
+  auto* p = static_cast<char*>(data);
+  std::size_t done = 0;
+  do {
+    const int n = static_cast<int>(std::min(kMaxMessage, bytes - done));
+    MPI_Bcast(p + done, n, MPI_BYTE, root, MPI_COMM_WORLD);
+    done += static_cast<std::size_t>(n);
+  } while (done < bytes);
+#else
+  (void)root, (void)data, (void)bytes;
+#endif
+}
+
+std::vector<std::uint8_t> BroadcastBytes(int root, std::vector<std::uint8_t> bytes) {
+  if (!Distributed()) return bytes;
+  std::uint64_t n = bytes.size();
+  Broadcast(root, &n, sizeof n);
+  bytes.resize(static_cast<std::size_t>(n));
+  Broadcast(root, bytes.data(), bytes.size());
+  return bytes;
+}
+
+void Unpacker::Take(void* dst, std::size_t n) {
+  BTF_CHECK(at_ + n <= bytes_.size());
+  if (n) std::memcpy(dst, bytes_.data() + at_, n);
+  at_ += n;
+}
+
+void Unpacker::CheckSize(std::uint64_t got, std::size_t want) { BTF_CHECK(got == want); }
+
 void Barrier() {
 #ifdef BTF_HAVE_MPI
   if (g_started) MPI_Barrier(MPI_COMM_WORLD);

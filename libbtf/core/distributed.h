@@ -8,6 +8,7 @@
 // number of ranks. Library code calls only this interface; the tools call Init and Finalize.
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <string>
 #include <vector>
 
@@ -36,12 +37,83 @@ inline int Owner(int item) { return item % Size(); }
 // Point to point, blocking, of raw bytes (any size; split into messages below 2^31 bytes).
 void Send(int to, int tag, const void* data, std::size_t bytes);
 void Recv(int from, int tag, void* data, std::size_t bytes);
+// A byte buffer of any size, its size sent first (pairs with RecvBytes).
+void SendBytes(int to, int tag, const std::vector<std::uint8_t>& bytes);
+std::vector<std::uint8_t> RecvBytes(int from, int tag);
+// Root's bytes on every rank (collective; a no-op outside a distributed run).
+void Broadcast(int root, void* data, std::size_t bytes);
+// Root's buffer, of any size, on every rank (collective).
+std::vector<std::uint8_t> BroadcastBytes(int root, std::vector<std::uint8_t> bytes);
 // Blocks until every rank has called it.
 void Barrier();
 // The maximum of x over all ranks, on every rank (exact).
 double AllMax(double x);
 // Every rank's bytes, on every rank (index = rank). For small per-rank results (statistics).
 std::vector<std::vector<std::uint8_t>> AllGather(const std::vector<std::uint8_t>& mine);
+
+// Every rank's vector of trivially copyable values, concatenated in rank order, on every rank
+// (collective). For per-item results of small size (assignments, residuals, statistics).
+template <typename T>
+std::vector<T> AllGatherConcat(const std::vector<T>& mine) {
+  const auto* p = reinterpret_cast<const std::uint8_t*>(mine.data());
+  const auto all = AllGather(std::vector<std::uint8_t>(p, p + mine.size() * sizeof(T)));
+  std::vector<T> out;
+  for (const auto& bytes : all) {
+    const std::size_t n = bytes.size() / sizeof(T), at = out.size();
+    out.resize(at + n);
+    if (n) std::memcpy(out.data() + at, bytes.data(), n * sizeof(T));
+  }
+  return out;
+}
+
+// Packs trivially copyable values and vectors of them into bytes, and reads them back in the
+// same order (all ranks run the same binary, so no byte-order or layout conversion is needed).
+class Packer {
+ public:
+  template <typename T>
+  void Put(const T& x) {
+    const auto* p = reinterpret_cast<const std::uint8_t*>(&x);
+    bytes.insert(bytes.end(), p, p + sizeof(T));
+  }
+  template <typename T>
+  void PutVector(const T* data, std::size_t n) {
+    Put(std::uint64_t(n));
+    const auto* p = reinterpret_cast<const std::uint8_t*>(data);
+    bytes.insert(bytes.end(), p, p + n * sizeof(T));
+  }
+  template <typename T>
+  void PutVector(const std::vector<T>& v) { PutVector(v.data(), v.size()); }
+  std::vector<std::uint8_t> bytes;
+};
+
+class Unpacker {
+ public:
+  explicit Unpacker(const std::vector<std::uint8_t>& bytes) : bytes_(bytes) {}
+  template <typename T>
+  T Get() {
+    T x;
+    Take(&x, sizeof(T));
+    return x;
+  }
+  template <typename T>
+  std::vector<T> GetVector() {
+    std::vector<T> v(static_cast<std::size_t>(Get<std::uint64_t>()));
+    Take(v.data(), v.size() * sizeof(T));
+    return v;
+  }
+  // Reads a vector of exactly n values into dst.
+  template <typename T>
+  void GetVectorInto(T* dst, std::size_t n) {
+    CheckSize(Get<std::uint64_t>(), n);
+    Take(dst, n * sizeof(T));
+  }
+
+ private:
+  void Take(void* dst, std::size_t n);
+  static void CheckSize(std::uint64_t got, std::size_t want);
+  const std::vector<std::uint8_t>& bytes_;
+  std::size_t at_ = 0;
+};
 
 // Ends the whole job with this exit code (MPI_Abort); does not return. Outside a distributed
 // run it calls std::exit.

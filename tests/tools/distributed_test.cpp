@@ -15,6 +15,7 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
+#include "libbtf/compress/codec.h"
 #include "libbtf/io/dataset_io.h"
 #include "tests/test_util.h"
 
@@ -86,6 +87,155 @@ TEST(Distributed, CompareFiguresAreIdenticalForOneToFourRanks) {
                             "light_rmse", "worst_images"})
       EXPECT_EQ(got[key], want[key]) << key << " with " << ranks << " ranks";
   }
+}
+
+// The stored arrays of two codecs are equal (the files' provenance holds run times, so the
+// files' bytes are not compared).
+void ExpectSameCodec(const Codec& a, const Codec& b, const std::string& what) {
+  ASSERT_EQ(a.method(), b.method()) << what;
+  ASSERT_EQ(a.pca_view().size(), b.pca_view().size()) << what;
+  for (std::size_t v = 0; v < a.pca_view().size(); ++v) {
+    const PcaViewSlot &x = a.pca_view()[v], &y = b.pca_view()[v];
+    EXPECT_EQ(x.components, y.components) << what << " slot " << v;
+    EXPECT_TRUE(x.mean == y.mean && x.basis == y.basis && x.weights == y.weights && x.eigenvalues == y.eigenvalues)
+        << what << " slot " << v;
+  }
+  const LpcaModel &x = a.lpca(), &y = b.lpca();
+  EXPECT_EQ(x.clusters, y.clusters) << what;
+  EXPECT_EQ(x.components, y.components) << what;
+  EXPECT_TRUE(x.cluster_of == y.cluster_of) << what;
+  EXPECT_TRUE(x.cluster_components == y.cluster_components) << what;
+  EXPECT_TRUE(x.means == y.means && x.basis == y.basis && x.weights == y.weights) << what;
+}
+
+// Compresses `input` with `flags` in one process and with 1-4 ranks: every codec array and
+// every error figure of the summary are bit-identical; the JSON names the ranks.
+void ExpectCompressionIndependentOfRanks(const std::string& input, const std::string& flags, const fs::path& dir) {
+  const fs::path serial = dir / "serial.h5";
+  const auto want = RunJson(test::Tool("btf-compress") + " " + input + flags + " -o " + serial.string());
+  ASSERT_GT(want.value("rmse", 0.0), 0) << "a lossless codec would compare nothing";
+  const Codec ref = ReadCodec(serial);
+  for (int ranks = 1; ranks <= 4; ++ranks) {
+    const fs::path out = dir / fmt::format("ranks{}.h5", ranks);
+    const auto got = RunJson(Mpirun(ranks) + test::Tool("btf-compress") + " " + input + flags + " -o " + out.string());
+    EXPECT_EQ(got.value("ranks", 0), ranks);
+    EXPECT_EQ(got.value("per_rank", nlohmann::json::array()).size(), std::size_t(ranks));
+    for (const char* key : {"rmse", "relative_error", "max_abs_error", "psnr_db", "codec_bytes", "components",
+                            "slot_components", "cluster_components", "iteration_relative_errors",
+                            "iteration_reassigned_texels", "warnings"})
+      if (want.contains(key))  // compared as text: doubles printed with every digit
+        EXPECT_EQ(got.value(key, nlohmann::json()).dump(), want[key].dump()) << key << " with " << ranks << " ranks";
+    ExpectSameCodec(ref, ReadCodec(out), fmt::format("{} ranks", ranks));
+    std::vector<std::string> left;
+    for (const auto& e : fs::directory_iterator(dir))
+      if (e.path().filename().string().find(".tmp-") != std::string::npos) left.push_back(e.path().string());
+    EXPECT_TRUE(left.empty()) << "temporary left behind: " << left.front();
+  }
+}
+
+// btf-compress --method pca-view: ranks decompose disjoint view slots (13 over 1-4 ranks:
+// uneven shares), rank 0 gathers them and writes.
+TEST(Distributed, PcaViewCodecIsTheSameForOneToFourRanks) {
+  REQUIRE_MPI();
+  const fs::path dir = test::TempDir();
+  const std::string in = (dir / "in.h5").string();
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-synth") + kSynth + " --quiet -o " + in), 0);
+  ExpectCompressionIndependentOfRanks(in, " --method pca-view --components 3", dir);
+}
+
+// btf-compress --method lpca: ranks own disjoint texel blocks. 48 x 48 texels are 9 blocks of
+// 256 texels (the last one shorter), split unevenly over 2-4 ranks; the k-means sample is every
+// texel (fewer than 8192).
+TEST(Distributed, LpcaCodecIsTheSameForOneToFourRanks) {
+  REQUIRE_MPI();
+  const fs::path dir = test::TempDir();
+  const std::string in = (dir / "in.h5").string();
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-synth") + " btf --views 0-5 --lights 0-5 --resolution 48 --samples 1 "
+                                                       "--quiet -o " + in),
+            0);
+  ExpectCompressionIndependentOfRanks(in, " --method lpca --clusters 6 --components 3 --seed 3", dir);
+}
+
+// The same with a random k-means sample (8192 of 96 x 96 texels, gathered on rank 0) and the
+// log transform.
+TEST(Distributed, LpcaWithASampledSeedingIsTheSameForOneToFourRanks) {
+  REQUIRE_MPI();
+  const fs::path dir = test::TempDir();
+  const std::string in = (dir / "in.h5").string();
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-synth") + " btf --views 0-3 --lights 0-3 --resolution 96 --samples 1 "
+                                                       "--quiet -o " + in),
+            0);
+  ExpectCompressionIndependentOfRanks(in, " --method lpca --clusters 5 --components 2 --log --max-iterations 4", dir);
+}
+
+// BTF_MAX_BYTES applies per rank: an LPCA whose texel-major matrix is over the limit is refused
+// by one process (exit 3, naming the limit) and succeeds with 4 ranks, each holding a quarter
+// of the texels (and rank 0 the 8192-texel sample, half of them).
+TEST(Distributed, LpcaOverOneRanksMemoryLimitSucceedsWithFourRanks) {
+  REQUIRE_MPI();
+  const fs::path dir = test::TempDir();
+  const std::string in = (dir / "in.h5").string();
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-synth") + " btf --views 0-2 --lights 0-2 --resolution 128 --samples 1 "
+                                                       "--quiet -o " + in),
+            0);
+  const double matrix = 4.0 * 128 * 128 * 3 * 3 * 3;  // texels x (views x lights x channels) floats
+  const std::string limit = fmt::format("BTF_MAX_BYTES={} ", std::uint64_t(0.6 * matrix));
+  const std::string flags = " --method lpca --clusters 4 --components 2 --max-iterations 3 --quiet";
+  std::string out;
+  const fs::path one = dir / "one.h5", four = dir / "four.h5";
+  const int rc1 = test::RunCommand(limit + test::Tool("btf-compress") + " " + in + flags + " -o " + one.string() + " 2>&1", &out);
+  EXPECT_EQ(rc1, 3) << out;
+  EXPECT_NE(out.find("BTF_MAX_BYTES"), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(one));
+  const std::string mpirun = Mpirun(4) + "-x " + limit.substr(0, limit.size() - 1) + " ";
+  const int rc4 = test::RunCommand(limit + mpirun + test::Tool("btf-compress") + " " + in + flags + " -o " + four.string() + " 2>&1", &out);
+  EXPECT_EQ(rc4, 0) << out;
+  ASSERT_TRUE(fs::exists(four));
+  // The same codec as one process with enough memory.
+  const fs::path free = dir / "free.h5";
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-compress") + " " + in + flags + " -o " + free.string()), 0);
+  ExpectSameCodec(ReadCodec(free), ReadCodec(four), "4 ranks under the limit");
+}
+
+// pca-view: the rank that owns the damaged view slot reports it (exit 3, its rank and the
+// file named) and no codec appears.
+TEST(Distributed, PcaViewRankThatReadsADamagedSlotEndsTheJob) {
+  REQUIRE_MPI();
+  const fs::path dir = test::TempDir();
+  const std::string a = (dir / "a.h5").string(), b = (dir / "b.h5").string(), codec = (dir / "c.h5").string();
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-synth") + kSynth + " --quiet -o " + a), 0);
+  {
+    Dataset d = ReadDataset(a);
+    d.view_slot(3)[5] = std::numeric_limits<float>::infinity();  // owned by rank 1 of 2
+    WriteDataset(b, d);
+  }
+  std::string out;
+  const int rc = test::RunCommand(Mpirun(2) + test::Tool("btf-compress") + " " + b + " --method pca-view --quiet -o " +
+                                      codec + " 2>&1",
+                                  &out);
+  EXPECT_EQ(rc, 3) << out;
+  EXPECT_NE(out.find("rank 1 of 2"), std::string::npos) << out;
+  EXPECT_NE(out.find(b), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(codec));
+}
+
+// fmf / dfmf (one global SVD) and decode / export do not split their work: refused on 2 ranks.
+TEST(Distributed, CompressCommandsThatDoNotSplitRefuseSeveralRanks) {
+  REQUIRE_MPI();
+  const fs::path dir = test::TempDir();
+  const std::string in = (dir / "in.h5").string(), codec = (dir / "c.h5").string();
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-synth") + kSynth + " --quiet -o " + in), 0);
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-compress") + " " + in + " --method pca-view --quiet -o " + codec), 0);
+  for (const auto& [args, name] : std::vector<std::pair<std::string, std::string>>{
+           {in + " --method fmf -o " + (dir / "f.h5").string(), "btf-compress --method fmf"},
+           {"decode " + codec + " -o " + (dir / "d.h5").string(), "btf-compress decode"}}) {
+    std::string out;
+    const int rc = test::RunCommand(Mpirun(2) + test::Tool("btf-compress") + " " + args + " 2>&1", &out);
+    EXPECT_EQ(rc, 2) << out;
+    EXPECT_NE(out.find("'" + name + "' does not run distributed"), std::string::npos) << out;
+  }
+  EXPECT_FALSE(fs::exists(dir / "f.h5"));
+  EXPECT_FALSE(fs::exists(dir / "d.h5"));
 }
 
 // A rank that fails on its part (view slot 1 of the test file holds a NaN, which compare refuses

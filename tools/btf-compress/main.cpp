@@ -3,6 +3,8 @@
 //   btf-compress DATASET --method pca-view|lpca|lpca-tensor|fmf|dfmf [...] -o codec.h5
 //   btf-compress decode CODEC -o dataset.h5
 //   btf-compress export CODEC --format schneider -o DIR
+#include <optional>
+
 #include "libbtf/compress/codec.h"
 #include "libbtf/export/schneider.h"
 #include "libbtf/io/bonn.h"
@@ -31,20 +33,27 @@ int RunCompress(const CLI::App& app, const btf::cli::CommonFlags& common, Compre
   f.options.method = btf::ParseMethod(f.method);
   f.options.storage = btf::ParseStorage(f.storage);
   if (!f.scene.empty()) f.options.scene = btf::SceneSpec::Load(f.scene);
+  // pca-view and lpca split their work over MPI ranks (docs/scaling.md); rank 0 alone writes.
+  if (btf::IsFullMatrixFactorisation(f.options.method) || f.options.method == btf::CodecMethod::kLpcaTensor)
+    btf::cli::RequireSingleRank("btf-compress --method " + f.method);
   // Claim the output before the work: an unwritable folder fails now, not after the compression.
-  btf::AtomicOutput target(f.output);
-  target.Reserve();
+  std::optional<btf::AtomicOutput> target;
+  if (btf::cli::PrintingRank()) {
+    target.emplace(f.output);
+    target->Reserve();
+  }
   btf::Codec codec;
   // A dataset file or a Bonn .btf file (decoded one view slot at a time).
   const auto input = btf::IsBonnFile(f.dataset) ? btf::OpenBonnSource(f.dataset) : btf::OpenDatasetSource(f.dataset);
   const btf::CompressSummary s = btf::Compress(f.options, *input, &codec, btf::cli::MakeReporter(common));
-  btf::WriteCodec(target, codec, "btf-compress");
+  if (target) btf::WriteCodec(*target, codec, "btf-compress");
   btf::cli::PrintSummary(app, common, s, {{"output", f.output}});
-  if (!common.json) fmt::print("  output                {}\n", f.output);
+  if (!common.json && btf::cli::PrintingRank()) fmt::print("  output                {}\n", f.output);
   return 0;
 }
 
 int RunDecode(const CLI::App& app, const btf::cli::CommonFlags& common, const DecodeFlags& f) {
+  btf::cli::RequireSingleRank("btf-compress decode");
   const btf::Codec codec = btf::ReadCodec(f.codec);
   const btf::DecodeSummary s = btf::DecodeToDatasetFile(codec, f.output, btf::cli::MakeReporter(common));
   btf::cli::PrintSummary(app, common, s, {{"codec", f.codec}});
@@ -52,6 +61,7 @@ int RunDecode(const CLI::App& app, const btf::cli::CommonFlags& common, const De
 }
 
 int RunExport(const CLI::App& app, const btf::cli::CommonFlags& common, const ExportFlags& f) {
+  btf::cli::RequireSingleRank("btf-compress export");
   if (f.format != "schneider") btf::ThrowUsage("unknown export format '{}' (available: schneider)", f.format);
   const btf::Codec codec = btf::ReadCodec(f.codec);
   const btf::SchneiderExportSummary s =
@@ -116,6 +126,7 @@ int main(int argc, char** argv) {
   ce->add_option("--atlas-side", ef.options.atlas_side,
                  "Largest atlas side in texels (3D texture width, height and depth; WebGL2 guarantees 256)");
   ce->add_option("-o,--output", ef.output, "Output folder")->required();
+  btf::cli::MarkDistributed(&app);  // compressing with pca-view or lpca; decode and export refuse
 
   return btf::cli::Main(argc, argv, app, [&] {
     if (cd->parsed()) return RunDecode(app, common, df);

@@ -200,6 +200,13 @@ std::string RankTag() {
 
 void MarkDistributed(CLI::App* command) { DistributedCommands().insert(command); }
 
+void RequireSingleRank(const std::string& what) {
+  if (dist::Distributed())
+    ThrowUsage("'{}' does not run distributed, but {} MPI ranks started it: run it without mpirun (docs/scaling.md "
+               "lists the distributed commands)",
+               what, dist::Size());
+}
+
 bool PrintingRank() { return dist::Rank() == 0; }
 
 void PrintJson(const CLI::App& app, const nlohmann::json& summary) {

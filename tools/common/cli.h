@@ -40,6 +40,9 @@ nlohmann::json EffectiveOptions(const CLI::App& app);
 // refuses to run: N copies of a single-process command would each do all the work and race on
 // its outputs.
 void MarkDistributed(CLI::App* command);
+// For a marked command whose work splits only in some modes (btf-compress: --method pca-view and
+// lpca, not fmf): refuses, as an unmarked command would, to run `what` on more than one rank.
+void RequireSingleRank(const std::string& what);
 
 // Prints one --json document on stdout: {"tool", "version", "schema_version", "options",
 // "ranks", "per_rank"} followed by the summary's keys (docs/architecture.md, "JSON output");
