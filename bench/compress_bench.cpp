@@ -326,11 +326,12 @@ BENCHMARK(BM_LpcaLloydReference)->Unit(benchmark::kSecond)->Iterations(1)->UseRe
 
 // Args: codec (0 pca-view, 1 lpca), threads (0 = all). values_per_s counts L x H x W x C decoded
 // values per second (the "texel-values"); with 1 thread it is the per-core rate.
-void BM_DecodeViewSlot(benchmark::State& st) {
-  const btf::Codec& c = st.range(0) == 0 ? *PcaCodec() : *LpcaCodec();
+// Decodes one view slot per iteration, cycling through the views, on `threads` threads (0 =
+// all); returns the values decoded per iteration.
+std::size_t DecodeSlots(benchmark::State& st, const btf::Codec& c, std::int64_t threads) {
   std::vector<float> out(c.image_size() * c.num_lights());
   const int before = omp_get_max_threads();
-  if (st.range(1) > 0) omp_set_num_threads(static_cast<int>(st.range(1)));
+  if (threads > 0) omp_set_num_threads(static_cast<int>(threads));
   int v = 0;
   for (auto _ : st) {
     c.DecodeViewSlot(v, out.data());
@@ -338,12 +339,18 @@ void BM_DecodeViewSlot(benchmark::State& st) {
     benchmark::DoNotOptimize(out.data());
   }
   omp_set_num_threads(before);
+  return out.size();
+}
+
+void BM_DecodeViewSlot(benchmark::State& st) {
+  const btf::Codec& c = st.range(0) == 0 ? *PcaCodec() : *LpcaCodec();
+  const std::size_t values = DecodeSlots(st, c, st.range(1));
   st.SetLabel(std::string(st.range(0) == 0 ? "pca-view" : "lpca") + (st.range(1) == 1 ? ", 1 thread" : ", all threads"));
   // One slot = L images = L x H x W texel values.
   st.counters["images_per_s"] = benchmark::Counter(double(st.iterations()) * c.num_lights(), benchmark::Counter::kIsRate);
   st.counters["texels_per_s"] = benchmark::Counter(double(st.iterations()) * c.num_lights() * c.height() * c.width(),
                                                    benchmark::Counter::kIsRate);
-  st.counters["values_per_s"] = benchmark::Counter(double(st.iterations()) * double(out.size()), benchmark::Counter::kIsRate);
+  st.counters["values_per_s"] = benchmark::Counter(double(st.iterations()) * double(values), benchmark::Counter::kIsRate);
 }
 BENCHMARK(BM_DecodeViewSlot)
     ->Args({0, 1})
@@ -385,19 +392,10 @@ const bool g_codec_files_registered = [] {
                                    static std::map<std::string, btf::Codec> cache;
                                    if (!cache.count(path)) cache[path] = btf::ReadCodec(path);
                                    const btf::Codec& c = cache[path];
-                                   std::vector<float> out(c.image_size() * c.num_lights());
-                                   const int before = omp_get_max_threads();
-                                   if (st.range(0) > 0) omp_set_num_threads(static_cast<int>(st.range(0)));
-                                   int v = 0;
-                                   for (auto _ : st) {
-                                     c.DecodeViewSlot(v, out.data());
-                                     v = (v + 1) % c.num_views();
-                                     benchmark::DoNotOptimize(out.data());
-                                   }
-                                   omp_set_num_threads(before);
+                                   const std::size_t values = DecodeSlots(st, c, st.range(0));
                                    st.SetLabel(btf::MethodName(c.method()) + (st.range(0) == 1 ? ", 1 thread" : ", all threads"));
                                    st.counters["values_per_s"] = benchmark::Counter(
-                                       double(st.iterations()) * double(out.size()), benchmark::Counter::kIsRate);
+                                       double(st.iterations()) * double(values), benchmark::Counter::kIsRate);
                                  })
         ->Arg(1)
         ->Arg(0)

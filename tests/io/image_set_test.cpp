@@ -42,6 +42,16 @@ ConvertOptions Pattern(const std::string& p) {
 // Views (theta, phi) and lights, in the order the import sorts them (theta, then phi).
 const std::vector<std::pair<int, int>> kViews = {{0, 0}, {15, 60}}, kLights = {{0, 0}, {30, 30}, {45, 20}};
 
+// Every image of a 2-view, 3-light set of KnownImage(v, l) came through exactly.
+void ExpectKnownImages(const Dataset& d) {
+  for (int v = 0; v < 2; ++v)
+    for (int l = 0; l < 3; ++l)
+      for (int y = 0; y < 3; ++y)
+        for (int x = 0; x < 4; ++x)
+          for (int c = 0; c < 3; ++c)
+            ASSERT_EQ(d.image(v, l)[(std::size_t(y) * 4 + x) * 3 + c], Known(v, l, y, x, c)) << v << l << y << x << c;
+}
+
 TEST(ImageSet, PatternFolderGivesTheImagesExactly) {
   const auto dir = test::TempDir();
   // Written in reverse order, views in folders; a stray file is ignored.
@@ -64,12 +74,7 @@ TEST(ImageSet, PatternFolderGivesTheImagesExactly) {
     EXPECT_LT((d.views()[v] - DirectionFromAngles(kViews[v].first * kDeg, kViews[v].second * kDeg)).norm(), 1e-6);
   for (int l = 0; l < 3; ++l)
     EXPECT_LT((d.lights()[l] - DirectionFromAngles(kLights[l].first * kDeg, kLights[l].second * kDeg)).norm(), 1e-6);
-  for (int v = 0; v < 2; ++v)
-    for (int l = 0; l < 3; ++l)
-      for (int y = 0; y < 3; ++y)
-        for (int x = 0; x < 4; ++x)
-          for (int c = 0; c < 3; ++c)
-            ASSERT_EQ(d.image(v, l)[(std::size_t(y) * 4 + x) * 3 + c], Known(v, l, y, x, c)) << v << l << y << x << c;
+  ExpectKnownImages(d);
   EXPECT_EQ(d.info().units, "relative");
   EXPECT_EQ(d.info().provenance["layout"], "pattern");
 }
@@ -262,12 +267,7 @@ TEST(ImageSet, ZipArchiveBuiltByteByByteGivesTheImagesExactly) {
   const Dataset d = ReadDataset(dir / "out.h5");
   ASSERT_EQ(d.num_views(), 2);
   ASSERT_EQ(d.num_lights(), 3);
-  for (int v = 0; v < 2; ++v)
-    for (int l = 0; l < 3; ++l)
-      for (int y = 0; y < 3; ++y)
-        for (int x = 0; x < 4; ++x)
-          for (int c = 0; c < 3; ++c)
-            ASSERT_EQ(d.image(v, l)[(std::size_t(y) * 4 + x) * 3 + c], Known(v, l, y, x, c)) << v << l << y << x << c;
+  ExpectKnownImages(d);
 
   // One flipped byte inside an entry's data fails its CRC: named as archive:entry, nothing written.
   test::Bytes bad = StoredZip(entries);
