@@ -1,5 +1,7 @@
 #pragma once
 // Test shorthands for the compression entry point (Compress writes the codec to an out-parameter).
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
@@ -38,6 +40,34 @@ inline Codec CompressPath(const std::filesystem::path& path, const CompressOptio
   const CompressSummary s = Compress(o, *OpenDatasetSource(path), &codec);
   if (summary) *summary = s;
   return codec;
+}
+
+// Every decoder of a 3-channel codec against DecodeViewSlot: DecodeImage within image_tol (0 =
+// bit-identical), DecodeAbrdf and Value (nearest texel, light 2, at the sampled directions) at
+// the texels (x, y) of `texels` within tol.
+inline void ExpectDecodersAgreeWithViewSlot(const Codec& c, double image_tol, double tol,
+                                            const std::vector<std::pair<int, int>>& texels) {
+  const int L = c.num_lights(), C = 3;
+  const std::size_t image = c.image_size(), T = image / C;
+  std::vector<float> slot(image * L), img(image);
+  for (int v = 0; v < c.num_views(); ++v) {
+    c.DecodeViewSlot(v, slot.data());
+    for (int l = 0; l < L; ++l) {
+      c.DecodeImage(v, l, img.data());
+      for (std::size_t i = 0; i < image; ++i) ASSERT_NEAR(img[i], slot[l * image + i], image_tol) << v << " " << l;
+    }
+    for (const auto& [x, y] : texels) {
+      const std::vector<float> a = c.DecodeAbrdf(y, x);
+      for (int l = 0; l < L; ++l)
+        for (int ch = 0; ch < C; ++ch)
+          EXPECT_NEAR(a[(std::size_t(v) * L + l) * C + ch], slot[(l * T + std::size_t(y) * c.width() + x) * C + ch], tol);
+      // At a sampled (wi, wo) and a texel centre, Value is that sample.
+      const Vec2 uv((x + 0.5) / c.width(), 1.0 - (y + 0.5) / c.height());
+      float out[3];
+      c.Value(uv, c.lights()[2], c.views()[v], out, UvFilter::kNearest);
+      for (int ch = 0; ch < C; ++ch) EXPECT_NEAR(out[ch], slot[(2 * T + std::size_t(y) * c.width() + x) * C + ch], tol);
+    }
+  }
 }
 
 }  // namespace btf::test

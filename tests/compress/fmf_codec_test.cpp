@@ -105,33 +105,10 @@ TEST_P(FmfMethods, EveryComponentReproducesTheInputAndTheErrorFallsWithComponent
 TEST_P(FmfMethods, DecodersAgreeWithTheViewSlot) {
   const Dataset d = RandomDataset();
   const Codec c = test::CompressDataset(d, Fmf(GetParam(), 5));
-  const int L = c.num_lights(), C = 3;
-  const std::size_t image = c.image_size(), T = image / C;
-  std::vector<float> slot(image * L), img(image);
   // DecodeViewSlot/DecodeImage use float GEMMs, DecodeAbrdf/Value double dot products of the
   // same float factors: they agree to float rounding of the sums (values ~1, k = 5).
   constexpr double kTol = 2e-6;
-  for (int v = 0; v < c.num_views(); ++v) {
-    c.DecodeViewSlot(v, slot.data());
-    for (int l = 0; l < L; ++l) {
-      c.DecodeImage(v, l, img.data());
-      for (std::size_t i = 0; i < image; ++i) ASSERT_EQ(img[i], slot[l * image + i]);
-    }
-    for (int y : {0, 4})
-      for (int x : {0, 5}) {
-        const std::vector<float> a = c.DecodeAbrdf(y, x);
-        for (int l = 0; l < L; ++l)
-          for (int ch = 0; ch < C; ++ch)
-            EXPECT_NEAR(a[(std::size_t(v) * L + l) * C + ch], slot[(l * T + std::size_t(y) * c.width() + x) * C + ch],
-                        kTol);
-        // At a sampled (wi, wo) and a texel centre, Value is that sample.
-        const Vec2 uv((x + 0.5) / c.width(), 1.0 - (y + 0.5) / c.height());
-        float out[3];
-        c.Value(uv, c.lights()[2], c.views()[v], out, UvFilter::kNearest);
-        for (int ch = 0; ch < C; ++ch)
-          EXPECT_NEAR(out[ch], slot[(2 * T + std::size_t(y) * c.width() + x) * C + ch], kTol);
-      }
-  }
+  test::ExpectDecodersAgreeWithViewSlot(c, 0.0, kTol, {{0, 0}, {5, 0}, {0, 4}, {5, 4}});
 }
 
 TEST_P(FmfMethods, CodecFileRoundTripsExactly) {

@@ -144,32 +144,10 @@ TEST(LpcaTensor, DecodersAgreeWithTheViewSlot) {
   CompressOptions o = Tensor(2, 4);
   o.target_error = 0.03;
   const Codec c = test::CompressDataset(d, o);
-  const int L = c.num_lights(), C = 3;
-  const std::size_t image = c.image_size(), T = image / C;
-  std::vector<float> slot(image * L), img(image);
   // The slot is summed in float (terms, then LPCA's weighted rows), the others in double: they
   // agree to float rounding of sums of values ~1 (a few ulps x terms).
   constexpr double kTol = 2e-5;
-  for (int v = 0; v < c.num_views(); ++v) {
-    c.DecodeViewSlot(v, slot.data());
-    for (int l = 0; l < L; ++l) {
-      c.DecodeImage(v, l, img.data());
-      for (std::size_t i = 0; i < image; ++i) ASSERT_NEAR(img[i], slot[l * image + i], kTol);
-    }
-    for (int y : {0, 5})
-      for (int x : {0, 3, 7}) {
-        const std::vector<float> a = c.DecodeAbrdf(y, x);
-        for (int l = 0; l < L; ++l)
-          for (int ch = 0; ch < C; ++ch)
-            EXPECT_NEAR(a[(std::size_t(v) * L + l) * C + ch], slot[(l * T + std::size_t(y) * c.width() + x) * C + ch],
-                        kTol);
-        const Vec2 uv((x + 0.5) / c.width(), 1.0 - (y + 0.5) / c.height());
-        float out[3];
-        c.Value(uv, c.lights()[2], c.views()[v], out, UvFilter::kNearest);
-        for (int ch = 0; ch < C; ++ch)
-          EXPECT_NEAR(out[ch], slot[(2 * T + std::size_t(y) * c.width() + x) * C + ch], kTol);
-      }
-  }
+  test::ExpectDecodersAgreeWithViewSlot(c, kTol, kTol, {{0, 0}, {3, 0}, {7, 0}, {0, 5}, {3, 5}, {7, 5}});
 }
 
 TEST(LpcaTensor, CodecFileRoundTripsExactly) {
