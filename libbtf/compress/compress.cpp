@@ -60,6 +60,7 @@ class SceneSlotSource final : public SlotSource {
   int width() const override { return in_.width() / block_; }
   int channels() const override { return static_cast<int>(channel_index_.size()); }
   DatasetInfo info() const override { return info_; }
+  bool computes_slots() const override { return in_.computes_slots(); }
   void ReadViewSlot(int v, float* dst) const override {
     std::vector<float> buf(in_.slot_size());
     in_.ReadViewSlot(view_index_[static_cast<std::size_t>(v)], buf.data());
@@ -213,8 +214,11 @@ void CompressPcaView(const SlotSource& in, const CompressOptions& o, const Trans
   Timer t;
   // Slots are decomposed P at a time, one per thread (coarse-grained parallelism: no barrier
   // per small GEMM, robust when the cores are shared), while the next P slots are read on
-  // another thread (HDF5 is only ever called from one thread at a time).
+  // another thread (HDF5 is only ever called from one thread at a time). A source that computes
+  // its slots (a factorised file) has no I/O to overlap: it is read in turn, so that memory is
+  // one slot per thread.
   const int P = std::max(1, omp_get_max_threads());
+  const bool ahead = !in.computes_slots();
   auto read = [&](int first) {
     std::vector<std::vector<float>> batch;
     for (int i = first; i < std::min(M, first + P); ++i) {
@@ -223,12 +227,13 @@ void CompressPcaView(const SlotSource& in, const CompressOptions& o, const Trans
     }
     return batch;
   };
-  std::future<std::vector<std::vector<float>>> next = std::async(std::launch::async, read, 0);
+  std::future<std::vector<std::vector<float>>> next;
+  if (ahead) next = std::async(std::launch::async, read, 0);
   for (int first = 0; first < M; first += P) {
     rep.Progress(std::size_t(first), std::size_t(M), "pca-view");
     t.Restart();
-    std::vector<std::vector<float>> raw = next.get();
-    if (first + P < M) next = std::async(std::launch::async, read, first + P);
+    std::vector<std::vector<float>> raw = ahead ? next.get() : read(first);
+    if (ahead && first + P < M) next = std::async(std::launch::async, read, first + P);
     sum.times.Add("read", t.Seconds());
     t.Restart();
     const int count = static_cast<int>(raw.size());
@@ -247,7 +252,7 @@ void CompressPcaView(const SlotSource& in, const CompressOptions& o, const Trans
       if (f) std::rethrow_exception(f);
     sum.times.Add("decompose", t.Seconds());
   }
-  if (M == 0) next.get();
+  if (ahead && M == 0) next.get();
   rep.Progress(std::size_t(M), std::size_t(M), "pca-view");
   if (dist::Distributed()) {
     t.Restart();

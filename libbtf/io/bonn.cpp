@@ -624,6 +624,16 @@ void BonnReader::Impl::ReadBdi(Cursor& c) {
   }
 }
 
+// The products that decode a slot are formed a block of texels at a time and scattered to the
+// slot layout, so that decoding needs no second slot-sized buffer.
+namespace {
+template <class F>
+void ForTexelBlocks(std::size_t texels, F&& f) {
+  constexpr std::size_t kBlock = 4096;
+  for (std::size_t i0 = 0; i0 < texels; i0 += kBlock) f(i0, std::min(kBlock, texels - i0));
+}
+}  // namespace
+
 void BonnReader::Impl::DecodeSlot(int view, float* out) const {
   BTF_CHECK(loaded && view >= 0 && view < h.views.size());
   const int nc = h.channels(), nl = h.lights.size();
@@ -633,9 +643,13 @@ void BonnReader::Impl::DecodeSlot(int view, float* out) const {
       for (int ch = 0; ch < nc; ++ch) {
         const RowMatrix& a = abrdf[std::size_t(ch)];
         const RowMatrix& t = texture[std::size_t(ch)];
-        RowMatrix m = a.middleRows(Eigen::Index(view) * nl, nl) * t.transpose();  // lights x texels
-        for (int l = 0; l < nl; ++l)
-          for (std::size_t i = 0; i < texels; ++i) out[(std::size_t(l) * texels + i) * nc + ch] = m(l, Eigen::Index(i));
+        ForTexelBlocks(texels, [&](std::size_t i0, std::size_t n) {
+          const RowMatrix m = a.middleRows(Eigen::Index(view) * nl, nl) *
+                              t.middleRows(Eigen::Index(i0), Eigen::Index(n)).transpose();  // lights x n texels
+          for (int l = 0; l < nl; ++l)
+            for (std::size_t i = 0; i < n; ++i)
+              out[(std::size_t(l) * texels + i0 + i) * nc + ch] = m(l, Eigen::Index(i));
+        });
       }
       BonnUndecorrelate(h.color_model, h.color_mean, h.color_transform, nc, out, std::size_t(nl) * texels);
       break;
@@ -645,11 +659,14 @@ void BonnReader::Impl::DecodeSlot(int view, float* out) const {
       const RowMatrix& t = texture[0];
       if (!h.transposed) {
         // rows c + nc (l + nl v): a (nc nl) x texels product, scattered to [l][texel][c].
-        RowMatrix m = a.middleRows(Eigen::Index(view) * nl * nc, Eigen::Index(nl) * nc) * t.transpose();
-        for (int l = 0; l < nl; ++l)
-          for (std::size_t i = 0; i < texels; ++i)
-            for (int ch = 0; ch < nc; ++ch)
-              out[(std::size_t(l) * texels + i) * nc + ch] = m(Eigen::Index(ch + nc * l), Eigen::Index(i));
+        ForTexelBlocks(texels, [&](std::size_t i0, std::size_t n) {
+          const RowMatrix m = a.middleRows(Eigen::Index(view) * nl * nc, Eigen::Index(nl) * nc) *
+                              t.middleRows(Eigen::Index(i0), Eigen::Index(n)).transpose();
+          for (int l = 0; l < nl; ++l)
+            for (std::size_t i = 0; i < n; ++i)
+              for (int ch = 0; ch < nc; ++ch)
+                out[(std::size_t(l) * texels + i0 + i) * nc + ch] = m(Eigen::Index(ch + nc * l), Eigen::Index(i));
+        });
       } else {
         // texture rows c + nc * texel: the lights x (texels nc) product is the slot layout.
         Eigen::Map<RowMatrix>(out, nl, Eigen::Index(texels) * nc) = a.middleRows(Eigen::Index(view) * nl, nl) * t.transpose();
@@ -675,13 +692,15 @@ void BonnReader::Impl::DecodeSlot(int view, float* out) const {
       }
       if (!h.pvf_images) {
         // val(c, l, texel) = W[texel] . C[c + nc l] + M[c + nc l]: a texels x (nc nl) product.
-        RowMatrix m = weights * comps.transpose();
-        for (int l = 0; l < nl; ++l)
-          for (std::size_t i = 0; i < texels; ++i)
-            for (int ch = 0; ch < nc; ++ch) {
-              const std::size_t d = std::size_t(ch) + std::size_t(nc) * l;
-              out[(std::size_t(l) * texels + i) * nc + ch] = m(Eigen::Index(i), Eigen::Index(d)) + mean[d];
-            }
+        ForTexelBlocks(texels, [&](std::size_t i0, std::size_t n) {
+          const RowMatrix m = weights.middleRows(Eigen::Index(i0), Eigen::Index(n)) * comps.transpose();
+          for (int l = 0; l < nl; ++l)
+            for (std::size_t i = 0; i < n; ++i)
+              for (int ch = 0; ch < nc; ++ch) {
+                const std::size_t d = std::size_t(ch) + std::size_t(nc) * l;
+                out[(std::size_t(l) * texels + i0 + i) * nc + ch] = m(Eigen::Index(i), Eigen::Index(d)) + mean[d];
+              }
+        });
       } else {
         // val(c, l, texel) = W[l] . C[c + nc texel] + M[c + nc texel]: lights x (texels nc), slot layout.
         Eigen::Map<RowMatrix> m(out, nl, Eigen::Index(texels) * nc);
@@ -778,6 +797,7 @@ class BonnSlotSource final : public SlotSource {
   int channels() const override { return reader_.header().channels(); }
   DatasetInfo info() const override { return reader_.header().Info(); }
   void ReadViewSlot(int view, float* out) const override { reader_.ReadViewSlot(view, out); }
+  bool computes_slots() const override { return reader_.header().format != BonnFormat::kBdi; }
 
  private:
   BonnReader reader_;

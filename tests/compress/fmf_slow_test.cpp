@@ -43,6 +43,7 @@ class FirstViews final : public SlotSource {
   int channels() const override { return in_.channels(); }
   DatasetInfo info() const override { return in_.info(); }
   void ReadViewSlot(int v, float* out) const override { in_.ReadViewSlot(v, out); }
+  bool computes_slots() const override { return in_.computes_slots(); }
 
  private:
   const SlotSource& in_;
@@ -107,8 +108,11 @@ TEST(FmfSlow, Ubo2014SizeDfmfByOurWriterInBtfInfoAndPcaViewPerSlotMemory) {
               static_cast<unsigned long long>(written.bytes_written), write, describe, slot_mib, compress, s.relative_error,
               before, after,
               after - before, (after - before) / slot_mib);
-  // pca-view holds about 5 slots per thread (docs/btf-compress.md, "Memory and streaming").
-  EXPECT_LT(after - before, 6 * slot_mib);
+  // The bound, one view slot plus the factors: a source that computes its slots is read
+  // in turn (no slot read ahead) and decoded a block of texels at a time (no per-channel
+  // product), so pca-view holds the slot it decomposes plus its models (mean, 4 basis images
+  // and weights per slot: 0.03 slot each) and the decode's 4096-texel blocks. Measured 1.10.
+  EXPECT_LT(after - before, 1.25 * slot_mib);
 }
 
 }  // namespace
