@@ -308,7 +308,8 @@ std::unique_ptr<btf::SlotSource> OpenCompressInput(const std::filesystem::path& 
 }
 
 py::object Compress(const std::filesystem::path& input, const std::filesystem::path& output, const std::string& method,
-                    int components, int clusters, double error, double energy, std::uint64_t seed, bool log,
+                    int components, int clusters, double error, double energy, std::uint64_t bytes,
+                    const std::string& storage, int quant_bits, double tensor_growth, std::uint64_t seed, bool log,
                     double log_epsilon, int max_iterations, double min_improvement,
                     const std::optional<std::filesystem::path>& scene, const std::optional<py::function>& progress) {
   btf::CompressOptions o;
@@ -317,6 +318,10 @@ py::object Compress(const std::filesystem::path& input, const std::filesystem::p
   o.clusters = clusters;
   o.target_error = error;
   o.retained_energy = energy;
+  o.max_bytes = bytes;
+  o.storage = btf::ParseStorage(storage);
+  o.quant_bits = quant_bits;
+  o.tensor_growth = tensor_growth;
   o.seed = seed;
   o.log_transform = log;
   o.log_epsilon = log_epsilon;
@@ -436,7 +441,8 @@ PYBIND11_MODULE(libbtf, m) {
   m.def("compress", &Compress, py::arg("input"), py::arg("output"), py::kw_only(),
         py::arg("method") = btf::MethodName(co.method), py::arg("components") = co.components,
         py::arg("clusters") = co.clusters, py::arg("error") = co.target_error, py::arg("energy") = co.retained_energy,
-        py::arg("seed") = co.seed, py::arg("log") = co.log_transform, py::arg("log_epsilon") = co.log_epsilon,
+        py::arg("bytes") = co.max_bytes, py::arg("storage") = btf::StorageName(co.storage),
+        py::arg("quant_bits") = co.quant_bits, py::arg("tensor_growth") = co.tensor_growth, py::arg("seed") = co.seed, py::arg("log") = co.log_transform, py::arg("log_epsilon") = co.log_epsilon,
         py::arg("max_iterations") = co.max_iterations, py::arg("min_improvement") = co.min_improvement,
         py::arg("scene") = py::none(), py::arg("progress") = py::none(),
         "btf-compress INPUT -o OUTPUT with the same options; returns its --json summary as a dict");

@@ -23,7 +23,7 @@ namespace btf {
 inline const Vec3 kSweepPointLight{0.5, 5.0, 1.0};
 
 struct SweepOptions {
-  std::vector<std::string> methods{"pca-view", "lpca"};  // codec methods (libbtf/compress)
+  std::vector<std::string> methods{"pca-view", "lpca", "lpca-tensor"};  // codec methods (libbtf/compress)
   std::vector<int> components{1, 2, 4, 8, 16};            // c per view slot / per cluster
   std::vector<int> clusters{8, 16, 32};                   // k, lpca only
   int runs = 3;                 // timed runs per setting; the median is reported

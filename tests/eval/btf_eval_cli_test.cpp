@@ -92,7 +92,7 @@ TEST(BtfEvalCli, CompareReadsCodecs) {
 
 TEST(BtfEvalCli, SweepWritesResultsPlotsAndReport) {
   const auto dir = test::TempDir();
-  // 3 views x 4 lights x 8x8 texels: 2 methods, a handful of settings, one timing run.
+  // 3 views x 4 lights x 8x8 texels: the default methods, a handful of settings, one timing run.
   WriteDataset(dir / "d.h5", test::MakeTestDataset(3, 4, 8, 8));
   std::string out;
   ASSERT_EQ(test::RunCommand(test::Tool("btf-eval") + " sweep " + Q(dir / "d.h5") + " -o " + Q(dir / "sweep") +
@@ -100,7 +100,7 @@ TEST(BtfEvalCli, SweepWritesResultsPlotsAndReport) {
                              &out),
             0);
   const auto j = nlohmann::json::parse(out);
-  ASSERT_EQ(j["points"].size(), 2u + 2u * 2u);  // pca-view: 2 settings, lpca: 2 x 2
+  ASSERT_EQ(j["points"].size(), 2u + 2u * 2u + 2u * 2u);  // pca-view: 2 settings, lpca and lpca-tensor: 2 x 2
   for (const auto& p : j["points"]) {
     EXPECT_GT(p["bytes"].get<double>(), 0);
     EXPECT_GT(p["compress_s"].get<double>(), 0);
@@ -124,6 +124,7 @@ TEST(BtfEvalCli, SweepWritesResultsPlotsAndReport) {
   for (const auto& e : std::filesystem::directory_iterator(dir / "sweep"))
     if (e.path().extension() == ".png") pngs.insert(e.path().filename().string());
   EXPECT_EQ(pngs, (std::set<std::string>{"render_lpca_cylinder_environment.png", "render_lpca_patch_point.png",
+                                         "render_lpca-tensor_cylinder_environment.png", "render_lpca-tensor_patch_point.png",
                                          "render_pca-view_cylinder_environment.png", "render_pca-view_patch_point.png"}));
   for (const auto& f : j["files"]) {
     const std::filesystem::path file = f.get<std::string>();
@@ -132,7 +133,7 @@ TEST(BtfEvalCli, SweepWritesResultsPlotsAndReport) {
       EXPECT_EQ(file.extension(), ".svg") << file;
     }
   }
-  EXPECT_EQ(j["renders"].size(), 4u);  // 2 methods x (patch + point, cylinder + environment)
+  EXPECT_EQ(j["renders"].size(), 6u);  // 3 methods x (patch + point, cylinder + environment)
   // The report is self-contained: the plots are inline SVG figures with their text in captions,
   // the renders PNG data URIs; nothing refers to other files.
   std::ifstream in(dir / "sweep" / "report.html");

@@ -210,6 +210,17 @@ def test_compress_matches_btf_compress(data):
                         log_epsilon=1e-2, max_iterations=5, min_improvement=1e-2, error=0, components=4, clusters=8)
     assert s["method"] == "pca-view" and max(s["slot_components"]) <= 4
     assert libbtf.open(d / "energy.h5").describe()["transform"] != "none"
+    # The rate-distortion and lpca-tensor keywords reach the library as the tool's flags do: the
+    # same codec bytes as btf-compress with the same flags.
+    flags = dict(method="lpca-tensor", clusters=2, components=3, quant_bits=8, tensor_growth=0.5)
+    s = libbtf.compress(data["gt"], d / "tensor.h5", **flags)
+    t = tool_json("btf-compress", data["gt"], "--method", "lpca-tensor", "-k", 2, "-c", 3, "--quant-bits", 8,
+                  "--tensor-growth", 0.5, "-o", d / "tensor_tool.h5")
+    assert s["codec_bytes"] == t["codec_bytes"] and s["storage"] == t["storage"]
+    half = libbtf.compress(data["gt"], d / "half.h5", method="pca-view", components=4, storage="half")
+    s = libbtf.compress(data["gt"], d / "budget.h5", method="pca-view", components=4, storage="half",
+                        bytes=half["codec_bytes"] - 1)
+    assert half["storage"] == "half" and 0 < s["codec_bytes"] < half["codec_bytes"]
 
 
 def test_compare_matches_btf_eval(data):
