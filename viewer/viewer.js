@@ -5,6 +5,7 @@
 // (libbtf/eval/render.cpp), so both draw the same (uv, wi, wo) per pixel: the ray is built from
 // gl_FragCoord and the camera's basis exactly as the CPU's Camera::Ray, not from the rasterised
 // position (whose interpolation differs by a fraction of a pixel).
+// ?export=DIR/ loads the export from that folder below the page instead.
 // Modes (?mode=): view (interactive), shot (one frame -> PNG data URL), eval (btf_eval at the
 // queries in /job/queries.f32 -> float results), bench (ms per frame).
 import * as THREE from 'three';
@@ -363,7 +364,11 @@ function finish(renderer) {
 
 async function main() {
   if (mode !== 'view') document.body.classList.add('headless');
-  const exp = await loadExport('./export/');
+  // ?export=DIR/ (a relative folder below the page, as btf-eval sweep --viewer links it), else /export/.
+  const dir = params.get('export') || 'export/';
+  if (!/^[A-Za-z0-9_.=,+-]+(\/[A-Za-z0-9_.=,+-]+)*\/$/.test(dir) || dir.split('/').includes('..'))
+    throw new Error(`export=${dir}: give a relative folder below the page, ending in /`);
+  const exp = await loadExport(`./${dir}`);
   const sc = params.get('job') || mode !== 'view' ? { ...defaultScene, ...(await fetchJson('./job/scene.json')) } : { ...defaultScene };
   if (mode === 'view') sc.width = innerWidth, sc.height = innerHeight;
   const canvas = document.getElementById('view');
