@@ -52,7 +52,8 @@ SchneiderExportSummary ExportSchneider(const SchneiderExportOptions& o, const Co
                                        const std::filesystem::path& out_dir, const Reporter& rep) {
   o.Check();
   if (codec.method() != CodecMethod::kLpca)
-    ThrowUsage("the schneider export needs an LPCA codec; this one is '{}' (compress with --method lpca; a pca-view codec exports with --format sattler)",
+    ThrowUsage("the schneider export needs an LPCA codec; this one is '{}' (compress with --method lpca; a pca-view "
+               "codec exports with --format sattler)",
                MethodName(codec.method()));
   if (codec.transform() != ValueTransform::kNone)
     ThrowUsage("the schneider export needs a codec without value transform (the renderer sums weighted "
