@@ -24,7 +24,7 @@ struct DecodeFlags {
 };
 
 struct ExportFlags {
-  std::string codec, output, format;  // empty: schneider for lpca, sattler for pca-view
+  std::string codec, output, format;  // schneider or sattler (CLI-checked); empty: by the codec's method
   btf::SchneiderExportOptions options;
   bool grids_given = false;  // --view-grid / --light-grid (schneider only)
 };
@@ -64,8 +64,6 @@ int RunDecode(const CLI::App& app, const btf::cli::CommonFlags& common, const De
 
 int RunExport(const CLI::App& app, const btf::cli::CommonFlags& common, const ExportFlags& f) {
   btf::cli::RequireSingleRank("btf-compress export");
-  if (!f.format.empty() && f.format != "schneider" && f.format != "sattler")
-    btf::ThrowUsage("unknown export format '{}' (available: schneider, sattler)", f.format);
   const btf::Codec codec = btf::ReadCodec(f.codec);
   const std::string format =
       !f.format.empty() ? f.format : codec.method() == btf::CodecMethod::kPcaView ? "sattler" : "schneider";
