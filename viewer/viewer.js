@@ -1,10 +1,11 @@
-// libbtf WebGL2 viewer (docs/viewer.md): loads a Schneider export (/export/manifest.json and its
-// files, btf_schneider.glsl included) and draws a plane or a cylinder under a point light or a
+// libbtf WebGL2 viewer (docs/viewer.md): loads a renderer export (/export/manifest.json and its
+// files, btf_schneider.glsl or btf_sattler.glsl included) and draws a plane or a cylinder under a point light or a
 // sampled sky. The surface point of each pixel is the analytic intersection of the pixel's ray
 // (camera -> rasterised proxy fragment) with the shape, as in the CPU renderer
 // (libbtf/eval/render.cpp), so both draw the same (uv, wi, wo) per pixel: the ray is built from
 // gl_FragCoord and the camera's basis exactly as the CPU's Camera::Ray, not from the rasterised
 // position (whose interpolation differs by a fraction of a pixel).
+// ?export=DIR/ loads the export from that folder below the page instead.
 // Modes (?mode=): view (interactive), shot (one frame -> PNG data URL), eval (btf_eval at the
 // queries in /job/queries.f32 -> float results), bench (ms per frame).
 import * as THREE from 'three';
@@ -38,46 +39,84 @@ const defaultScene = {
   environment: { directions: [], radiance_solid_angle: [] },
 };
 
-// Export textures (docs/viewer.md, "Binding the textures").
+// Export textures (docs/viewer.md, "Binding the textures"): layout schneider-2004 (LPCA, a 3D
+// atlas) or sattler-2003 (pca-view, a 2D texture array of per-view images).
 async function loadExport(base) {
   const m = await fetchJson(`${base}manifest.json`);
   if (m.format !== 'libbtf-schneider-export' || !String(m.format_version).startsWith('2.'))
     throw new Error(`unsupported export: ${m.format} ${m.format_version} (the viewer reads 2.x)`);
+  const layout = m.layout || 'schneider-2004';
+  if (layout === 'sattler-2003') return loadSattler(base, m);
+  if (layout !== 'schneider-2004') throw new Error(`unsupported export layout '${layout}'`);
   const a = m.atlas, W = m.texture.width, H = m.texture.height, C = m.texture.channels;
   const F = m.functions.count_per_cluster, NT = F + 1, NT4 = Math.ceil(NT / 4);
-  const raw = await fetchBytes(base + a.file);
-  const half = a.storage === 'f16';
-  const src = half ? new Uint16Array(raw) : new Uint8Array(raw);
   const perPage = a.depth * a.height * a.width;
-  if (src.length !== a.pages * perPage * C) throw new Error(`${a.file}: ${src.length} values, expected ${a.pages * perPage * C}`);
+  const src = await loadValues(base, a.file, a.storage, a.pages * perPage * C);
   const pages = [];
   for (let p = 0; p < a.pages; ++p) {
-    // RGBA (alpha unused): three.js uploads RGBA8 / RGBA16F; the values are those of the file.
-    const data = half ? new Uint16Array(perPage * 4) : new Uint8Array(perPage * 4);
-    for (let i = 0; i < perPage; ++i)
-      for (let c = 0; c < 4; ++c) data[i * 4 + c] = c < C ? src[(p * perPage + i) * C + c] : (c === 3 ? (half ? 0x3c00 : 255) : src[(p * perPage + i) * C]);
-    const t = new THREE.Data3DTexture(data, a.width, a.height, a.depth);
-    t.format = THREE.RGBAFormat;
-    t.type = half ? THREE.HalfFloatType : THREE.UnsignedByteType;
+    const t = new THREE.Data3DTexture(rgba(src, p * perPage, perPage, C, a.storage), a.width, a.height, a.depth);
     t.minFilter = t.magFilter = THREE.LinearFilter;
-    t.wrapS = t.wrapT = t.wrapR = THREE.ClampToEdgeWrapping;
-    t.generateMipmaps = false;
-    t.unpackAlignment = 1;
-    t.colorSpace = THREE.NoColorSpace;
-    t.needsUpdate = true;
-    pages.push(t);
+    t.wrapR = THREE.ClampToEdgeWrapping;
+    pages.push(valueTexture(t, a.storage));
   }
-  const terms = new Float32Array(await fetchBytes(base + m.terms.file));
-  if (terms.length !== W * H * NT) throw new Error(`${m.terms.file}: ${terms.length} values, expected ${W * H * NT}`);
-  const tdata = new Float32Array(W * NT4 * 4 * H);
-  for (let t = 0; t < W * H; ++t) for (let j = 0; j < NT; ++j) tdata[t * NT4 * 4 + j] = terms[t * NT + j];
-  const termsTex = dataTexture(tdata, W * NT4, H, THREE.RGBAFormat);
+  const termsTex = termsTexture(await fetchBytes(base + m.terms.file), m.terms.file, W * H, NT, W, H);
   const idx = new Uint16Array(await fetchBytes(base + m.cluster_index.file));
   const clusterTex = dataTexture(Float32Array.from(idx), W, H, THREE.RedFormat);
   const glsl = await fetchText(base + m.glsl.file);
   const uniforms = { btf_terms: { value: termsTex }, btf_cluster: { value: clusterTex } };
   pages.forEach((t, p) => (uniforms[p === 0 ? 'btf_atlas' : `btf_atlas${p}`] = { value: t }));
-  return { manifest: m, glsl, uniforms };
+  const info = `${m.scale_bias.shape[0]} clusters x ${F} functions, atlas ${a.width}x${a.height}x${a.depth} ${a.storage}`;
+  return { manifest: m, glsl, uniforms, info };
+}
+
+async function loadSattler(base, m) {
+  const im = m.images, C = m.texture.channels, F = m.functions.count_per_view, NT = F + 1;
+  const n = im.layers * im.height * im.width;
+  const src = await loadValues(base, im.file, im.storage, n * C);
+  const t = new THREE.DataArrayTexture(rgba(src, 0, n, C, im.storage), im.width, im.height, im.layers);
+  t.minFilter = t.magFilter = THREE.NearestFilter;
+  const V = m.views.count, L = m.lights.count;
+  const termsTex = termsTexture(await fetchBytes(base + m.terms.file), m.terms.file, V * L, NT, L, V);
+  const glsl = await fetchText(base + m.glsl.file);
+  const info = `${V} views x ${F} images, ${L} lights, texture array ${im.width}x${im.height}x${im.layers} ${im.storage}`;
+  return { manifest: m, glsl, uniforms: { btf_images: { value: valueTexture(t, im.storage) }, btf_terms: { value: termsTex } }, info };
+}
+
+async function loadValues(base, file, storage, count) {
+  const raw = await fetchBytes(base + file);
+  const src = storage === 'f16' ? new Uint16Array(raw) : new Uint8Array(raw);
+  if (src.length !== count) throw new Error(`${file}: ${src.length} values, expected ${count}`);
+  return src;
+}
+
+// n texels of C channels from `first` as RGBA (alpha unused): three.js uploads RGBA8 / RGBA16F;
+// the values are those of the file (1 channel replicated).
+function rgba(src, first, n, C, storage) {
+  const half = storage === 'f16';
+  const data = half ? new Uint16Array(n * 4) : new Uint8Array(n * 4);
+  for (let i = 0; i < n; ++i)
+    for (let c = 0; c < 4; ++c) data[i * 4 + c] = c < C ? src[(first + i) * C + c] : (c === 3 ? (half ? 0x3c00 : 255) : src[(first + i) * C]);
+  return data;
+}
+
+function valueTexture(t, storage) {
+  t.format = THREE.RGBAFormat;
+  t.type = storage === 'f16' ? THREE.HalfFloatType : THREE.UnsignedByteType;
+  t.wrapS = t.wrapT = THREE.ClampToEdgeWrapping;
+  t.generateMipmaps = false;
+  t.unpackAlignment = 1;
+  t.colorSpace = THREE.NoColorSpace;
+  t.needsUpdate = true;
+  return t;
+}
+
+// terms.f32 ([rows][cols][NT] floats) as an RGBA32F texture (cols * ceil(NT / 4)) x rows, zero-padded.
+function termsTexture(raw, file, count, NT, cols, rows) {
+  const terms = new Float32Array(raw), NT4 = Math.ceil(NT / 4);
+  if (terms.length !== count * NT) throw new Error(`${file}: ${terms.length} values, expected ${count * NT}`);
+  const data = new Float32Array(cols * NT4 * 4 * rows);
+  for (let t = 0; t < count; ++t) for (let j = 0; j < NT; ++j) data[t * NT4 * 4 + j] = terms[t * NT + j];
+  return dataTexture(data, cols * NT4, rows, THREE.RGBAFormat);
 }
 
 function dataTexture(data, w, h, format) {
@@ -325,7 +364,11 @@ function finish(renderer) {
 
 async function main() {
   if (mode !== 'view') document.body.classList.add('headless');
-  const exp = await loadExport('./export/');
+  // ?export=DIR/ (a relative folder below the page, as btf-eval sweep --viewer links it), else /export/.
+  const dir = params.get('export') || 'export/';
+  if (!/^[A-Za-z0-9_.=,+-]+(\/[A-Za-z0-9_.=,+-]+)*\/$/.test(dir) || dir.split('/').includes('..'))
+    throw new Error(`export=${dir}: give a relative folder below the page, ending in /`);
+  const exp = await loadExport(`./${dir}`);
   const sc = params.get('job') || mode !== 'view' ? { ...defaultScene, ...(await fetchJson('./job/scene.json')) } : { ...defaultScene };
   if (mode === 'view') sc.width = innerWidth, sc.height = innerHeight;
   const canvas = document.getElementById('view');
@@ -437,8 +480,7 @@ function interactive(renderer, view, cam, sc, exp) {
   });
   const m = exp.manifest;
   document.getElementById('info').textContent =
-    `${m.texture.width}x${m.texture.height} texels, ${m.scale_bias.shape[0]} clusters x ${m.functions.count_per_cluster} functions, ` +
-    `atlas ${m.atlas.width}x${m.atlas.height}x${m.atlas.depth} ${m.atlas.storage}; ${glRendererName(renderer)}`;
+    `${m.texture.width}x${m.texture.height} texels, ${exp.info}; ${glRendererName(renderer)}`;
   const msEl = document.getElementById('ms');
   let dirty = true, avg = null;
   const frame = () => {

@@ -12,6 +12,8 @@
 #include "libbtf/compress/codec_source.h"
 #include "libbtf/eval/metrics.h"
 #include "libbtf/eval/plot.h"
+#include "libbtf/export/sattler.h"
+#include "libbtf/export/schneider.h"
 #include "libbtf/io/dataset_io.h"
 #include "libbtf/io/image_io.h"
 
@@ -35,6 +37,9 @@ void SweepOptions::Check() const {
   BTF_CHECK_OPTION(std::isfinite(render_max_rel_error) && render_max_rel_error >= 0, "render_max_rel_error",
                    "must be >= 0");
   render_options.Check();
+  BTF_CHECK_OPTION(viewer_dir.empty() || render, "viewer_dir", "needs render (the viewer shows the rendered codecs)");
+  BTF_CHECK_OPTION(viewer_dir.empty() || std::filesystem::exists(std::filesystem::path(viewer_dir) / "node_modules/three/build/three.module.js"),
+                   "viewer_dir", "must be the viewer folder with node_modules/three (run 'npm ci' in it; ./run does)");
 }
 
 double Median(std::vector<double> v) {
@@ -296,6 +301,54 @@ void WritePlots(const OutputFolder& out, const std::vector<std::pair<std::string
   }
 }
 
+// ---- Phase 6 (viewer_dir): renderer exports of the rendered codecs and the viewer beside them. ----
+
+// The viewer's files the page loads (index.html's import map), copied with the same relative paths.
+constexpr const char* kViewerFiles[] = {"index.html", "viewer.js", "node_modules/three/LICENSE",
+                                        "node_modules/three/build/three.module.js",
+                                        "node_modules/three/build/three.core.js",
+                                        "node_modules/three/examples/jsm/controls/OrbitControls.js"};
+
+std::vector<SweepViewerExport> ExportForViewer(const std::vector<SweepPoint>& points, const RenderChoice& choice,
+                                               const SweepOptions& o, const OutputFolder& out,
+                                               const Reporter& reporter, std::vector<std::string>& files) {
+  std::vector<SweepViewerExport> exports;
+  for (const auto& m : o.methods) {
+    const RenderChoice::Chosen* chosen = choice.Find(m);
+    if (!chosen) continue;
+    const Codec& codec = chosen->codec;
+    if ((m != "lpca" && m != "pca-view") || codec.transform() != ValueTransform::kNone) {
+      reporter.Warn("viewer: {} is not exported (renderer exports take lpca and pca-view codecs without --log)",
+                    PointName(points[chosen->index]));
+      continue;
+    }
+    SweepViewerExport e;
+    e.method = m;
+    e.label = PointName(points[chosen->index]);
+    const std::string rel = "viewer/exports/" + e.label;
+    std::filesystem::create_directories(out.Work("viewer/exports"));
+    if (m == "lpca") {
+      ExportSchneider({}, codec, out.Work(rel));
+      e.layout = kSchneiderLayout;
+    } else {
+      ExportSattler({}, codec, out.Work(rel));
+      e.layout = kSattlerLayout;
+    }
+    e.directory = out.Final(rel);
+    e.page = "viewer/index.html?export=exports/" + e.label + "/";
+    files.push_back(e.directory);
+    exports.push_back(e);
+  }
+  for (const char* f : kViewerFiles) {
+    const std::filesystem::path to = out.Work("viewer") / f;
+    std::filesystem::create_directories(to.parent_path());
+    const std::string bytes = ReadFileBytes(std::filesystem::path(o.viewer_dir) / f, "viewer file");
+    WriteFileAtomic(to, bytes.data(), bytes.size());
+  }
+  files.push_back(out.Final("viewer/index.html"));
+  return exports;
+}
+
 // ---- Phase 5: rendered comparisons, ground truth (the dataset) against each method's choice. ----
 
 std::vector<SweepRender> RenderComparisons(const Dataset& data, const std::vector<SweepPoint>& points,
@@ -445,10 +498,24 @@ std::string ReportMetrics() {
          "<p>Data: <code>results.json</code> next to this file. Definitions: docs/btf-eval.md.</p>\n</body></html>\n";
 }
 
+std::string ReportViewer(const SweepSummary& s) {
+  if (s.viewer_exports.empty()) return {};
+  std::string h =
+      "<h2>Viewer</h2>\n<p>The rendered codecs exported for real-time rendering (docs/viewer.md) and drawn by the "
+      "WebGL2 viewer in <code>viewer/</code> beside this report. Browsers do not load its files from "
+      "<code>file://</code>: serve this folder over HTTP (any static server) to use the links and the frame below, "
+      "or run <code>btf-eval view viewer/exports/SETTING</code> here.</p>\n<ul>\n";
+  for (const auto& e : s.viewer_exports)
+    h += fmt::format("<li><a href=\"{0}\">{1}</a> ({2} export in <code>viewer/exports/{1}/</code>)</li>\n",
+                     EscapeXml(e.page), EscapeXml(e.label), e.layout);
+  return h + fmt::format("</ul>\n<iframe title=\"viewer: {}\" src=\"{}\" width=\"800\" height=\"500\"></iframe>\n",
+                         EscapeXml(s.viewer_exports.front().label), EscapeXml(s.viewer_exports.front().page));
+}
+
 std::string ReportHtml(const SweepSummary& s, const SweepOptions& o,
                        const std::vector<std::pair<std::string, Plot>>& plots, const OutputFolder& out) {
   return ReportHead(s) + ReportIntro(s, o) + ReportPlots(plots) + ReportTable(s) + ReportRenders(s, o, out) +
-         ReportMetrics();
+         ReportViewer(s) + ReportMetrics();
 }
 
 // results.json and report.html (last), added to the summary's files.
@@ -513,6 +580,10 @@ nlohmann::json SweepSummary::ToJson() const {
   for (const auto& r : renders)
     j["renders"].push_back({{"method", r.method}, {"label", r.label}, {"scene", r.scene}, {"lighting", r.lighting},
                             {"file", r.file}, {"max_rel_diff", r.max_rel_diff}, {"mean_rel_diff", r.mean_rel_diff}});
+  j["viewer_exports"] = nlohmann::json::array();
+  for (const auto& e : viewer_exports)
+    j["viewer_exports"].push_back({{"method", e.method}, {"label", e.label}, {"layout", e.layout},
+                                   {"directory", e.directory}, {"page", e.page}});
   j["files"] = files;
   j["report"] = report;
   j["seconds"] = times.ToJson();
@@ -547,6 +618,11 @@ SweepSummary RunSweep(const SweepOptions& o, const std::filesystem::path& datase
     timer.Restart();
     s.renders = RenderComparisons(data, s.points, choice, o, out, reporter, s.files);
     s.times.Add("render", timer.Seconds());
+  }
+  if (!o.viewer_dir.empty()) {
+    timer.Restart();
+    s.viewer_exports = ExportForViewer(s.points, choice, o, out, reporter, s.files);
+    s.times.Add("viewer", timer.Seconds());
   }
 
   timer.Restart();

@@ -46,6 +46,12 @@ struct SweepOptions {
     return r;
   }();
   std::string command_line;     // shown in the report (how it was made)
+  // Non-empty: the WebGL2 viewer folder (viewer/, with node_modules/three from npm ci). Each
+  // method's rendered codec that a renderer export takes (lpca: schneider, pca-view: sattler;
+  // default export options) is exported into DIR/viewer/exports/<setting>/, the viewer's page and
+  // the three.js files it loads are copied into DIR/viewer/, and the report links them (needs
+  // render: the rendered codecs are the chosen ones).
+  std::string viewer_dir;
   void Check() const;
 };
 
@@ -74,6 +80,10 @@ struct SweepRender {
   double mean_rel_diff = 0;
 };
 
+struct SweepViewerExport {
+  std::string method, label, layout, directory, page;  // page: relative to the report, with ?export=
+};
+
 struct SweepSummary {
   std::string dataset, output_dir, error_metric;
   int views = 0, lights = 0, height = 0, width = 0, channels = 0;
@@ -81,6 +91,7 @@ struct SweepSummary {
   double psnr_peak = 0;
   std::vector<SweepPoint> points;
   std::vector<SweepRender> renders;
+  std::vector<SweepViewerExport> viewer_exports;  // with SweepOptions::viewer_dir
   std::vector<std::string> files;  // everything written, report last
   std::string report;
   PhaseTimes times;

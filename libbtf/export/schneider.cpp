@@ -5,19 +5,12 @@
 
 #include "libbtf/core/atomic_file.h"
 #include "libbtf/core/error.h"
-#include "libbtf/export/half.h"
+#include "libbtf/export/export_common.h"
 
 namespace btf {
 
-namespace {
-
-template <typename T>
-std::uint64_t WriteBinary(const std::filesystem::path& path, const std::vector<T>& data) {
-  WriteFileAtomic(path, data.data(), data.size() * sizeof(T));
-  return data.size() * sizeof(T);
-}
-
-}  // namespace
+using export_detail::NormalisedStore;
+using export_detail::WriteBinary;
 
 void SchneiderExportOptions::Check() const {
   BTF_CHECK_OPTION(view_grid >= 2 && view_grid <= 256, "view_grid", "must be 2..256");
@@ -59,7 +52,8 @@ SchneiderExportSummary ExportSchneider(const SchneiderExportOptions& o, const Co
                                        const std::filesystem::path& out_dir, const Reporter& rep) {
   o.Check();
   if (codec.method() != CodecMethod::kLpca)
-    ThrowUsage("the schneider export needs an LPCA codec; this one is '{}' (compress with --method lpca)",
+    ThrowUsage("the schneider export needs an LPCA codec; this one is '{}' (compress with --method lpca; a pca-view "
+               "codec exports with --format sattler)",
                MethodName(codec.method()));
   if (codec.transform() != ValueTransform::kNone)
     ThrowUsage("the schneider export needs a codec without value transform (the renderer sums weighted "
@@ -94,8 +88,7 @@ SchneiderExportSummary ExportSchneider(const SchneiderExportOptions& o, const Co
   const int AW = tiles_x * nv, AH = tiles_y * nv, AD = nl * nl;
   const std::size_t atlas_values = std::size_t(pages) * AD * AH * AW * C;
   const bool half = o.storage == "f16";
-  std::vector<std::uint8_t> tex8(half ? 0 : atlas_values);
-  std::vector<std::uint16_t> tex16(half ? atlas_values : 0);
+  NormalisedStore store(half, atlas_values);
   std::vector<float> scale_bias(std::size_t(G) * 2, 0.0f);
   double max_q = 0;
   for (int k = 0; k < K; ++k) {
@@ -135,15 +128,7 @@ SchneiderExportSummary ExportSchneider(const SchneiderExportOptions& o, const Co
               const double t = scale > 0 ? std::clamp((v - bias) / double(scale), 0.0, 1.0) : 0.0;
               const std::size_t at =
                   (((std::size_t(page) * AD + z) * AH + std::size_t(ty) * nv + tv) * AW + std::size_t(tx) * nv + sv) * C + ch;
-              double stored;
-              if (half) {
-                tex16[at] = FloatToHalf(static_cast<float>(t));
-                stored = HalfToFloat(tex16[at]);
-              } else {
-                tex8[at] = static_cast<std::uint8_t>(std::clamp(std::lround(t * 255.0), 0L, 255L));
-                stored = tex8[at] / 255.0;
-              }
-              max_q = std::max(max_q, std::abs(stored - t));
+              max_q = std::max(max_q, std::abs(store.Put(at, t) - t));
             }
     }
   }
@@ -167,7 +152,7 @@ SchneiderExportSummary ExportSchneider(const SchneiderExportOptions& o, const Co
     terms[t * NT] = static_cast<float>(offset);
   }
   const std::string atlas_file = half ? "atlas.f16" : "atlas.u8";
-  s.texture_bytes = half ? WriteBinary(dir / atlas_file, tex16) : WriteBinary(dir / atlas_file, tex8);
+  s.texture_bytes = store.Write(dir / atlas_file);
   s.weight_bytes = WriteBinary(dir / "terms.f32", terms);
   s.index_bytes = WriteBinary(dir / "cluster_index.u16", index);
   WriteBinary(dir / "scale_bias.f32", scale_bias);
@@ -175,13 +160,11 @@ SchneiderExportSummary ExportSchneider(const SchneiderExportOptions& o, const Co
   nlohmann::json j;
   j["format"] = kSchneiderExportFormat;
   j["format_version"] = kSchneiderExportVersion;
+  j["layout"] = kSchneiderLayout;
   j["source"] = {{"codec_method", "lpca"}, {"view_sampling", codec.views().name()},
                  {"light_sampling", codec.lights().name()}, {"compression", codec.provenance().value("options", nlohmann::json())}};
-  j["texture"] = {{"height", codec.height()}, {"width", codec.width()}, {"channels", C},
-                  {"channel_names", codec.info().channel_names}, {"row_0", "top (v = 1)"},
-                  {"texel_of_uv", "x = floor(u * width), y = floor((1 - v) * height), wrapping"}};
-  j["values"] = {{"units", codec.info().units}, {"color_space", codec.info().color_space},
-                 {"cos_theta_i_included", codec.info().cos_theta_i_included}};
+  j["texture"] = export_detail::TextureJson(codec);
+  j["values"] = export_detail::ValuesJson(codec);
   j["parameterisation"] = {
       {"map", "elevated concentric (Schneider 2004 section 6.1): square -> Shirley-Chiu disk -> hemisphere with "
               "z = 1 - rho^2, (x, y) scaled by sqrt(2 - rho^2)"},
@@ -196,8 +179,7 @@ SchneiderExportSummary ExportSchneider(const SchneiderExportOptions& o, const Co
       {"file", atlas_file},
       {"type", half ? "float16" : "uint8"},
       {"storage", o.storage},
-      {"webgl_format", half ? (C == 1 ? "R16F / RED / HALF_FLOAT" : "RGB16F / RGB / HALF_FLOAT")
-                            : (C == 1 ? "R8 / RED / UNSIGNED_BYTE" : "RGB8 / RGB / UNSIGNED_BYTE")},
+      {"webgl_format", export_detail::WebGlFormat(half, C)},
       {"shape", {pages, AD, AH, AW, C}},
       {"dimension_names", {"page", "z", "y", "x", "channel"}},
       {"width", AW}, {"height", AH}, {"depth", AD}, {"pages", pages},

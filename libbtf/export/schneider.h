@@ -30,7 +30,11 @@
 namespace btf {
 
 inline constexpr const char* kSchneiderExportFormat = "libbtf-schneider-export";
-inline constexpr const char* kSchneiderExportVersion = "2.0.0";
+// 2.1.0 added "layout": kSchneiderLayout (LPCA, this file) or kSattlerLayout (pca-view,
+// libbtf/export/sattler.h); a 2.0.0 manifest without it is the Schneider layout.
+inline constexpr const char* kSchneiderExportVersion = "2.1.0";
+inline constexpr const char* kSchneiderLayout = "schneider-2004";
+inline constexpr const char* kSattlerLayout = "sattler-2003";
 
 struct SchneiderExportOptions {
   int view_grid = 16;   // n_sv = n_tv: samples per side of the view square

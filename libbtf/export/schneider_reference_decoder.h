@@ -8,7 +8,6 @@
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
-#include <fstream>
 #include <string>
 #include <vector>
 
@@ -16,21 +15,15 @@
 
 #include "libbtf/core/directions.h"
 #include "libbtf/core/error.h"
-#include "libbtf/export/half.h"
+#include "libbtf/export/export_reader.h"
 
 namespace btf {
 
 class SchneiderReferenceDecoder {
  public:
   explicit SchneiderReferenceDecoder(const std::filesystem::path& dir) {
-    std::ifstream in(dir / "manifest.json");
-    if (!in) ThrowIo("cannot open '{}'", (dir / "manifest.json").string());
-    const nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
-    if (j.is_discarded() || j.value("format", "") != "libbtf-schneider-export")
-      ThrowBadInput("'{}' is not a libbtf Schneider export manifest", (dir / "manifest.json").string());
-    if (j.value("format_version", "").rfind("2.", 0) != 0)
-      ThrowBadInput("'{}': unsupported export version '{}' (this decoder reads 2.x)", (dir / "manifest.json").string(),
-                    j.value("format_version", ""));
+    using namespace export_detail;
+    const nlohmann::json j = ReadExportManifest(dir, "schneider-2004");
     const auto& fn = j.at("functions");
     const auto& atlas = j.at("atlas");
     clusters_ = j.at("scale_bias").at("shape")[0];
@@ -38,8 +31,7 @@ class SchneiderReferenceDecoder {
     nv_ = fn.at("view_grid");
     nl_ = fn.at("light_grid");
     channels_ = j.at("texture").at("channels");
-    const auto& cos_included = j.at("values").at("cos_theta_i_included");
-    cos_theta_i_included_ = cos_included.is_boolean() ? cos_included.get<bool>() : cos_included.get<int>() != 0;
+    cos_theta_i_included_ = JsonFlag(j.at("values").at("cos_theta_i_included"));
     height_ = j.at("texture").at("height");
     width_ = j.at("texture").at("width");
     aw_ = atlas.at("width");
@@ -54,19 +46,9 @@ class SchneiderReferenceDecoder {
     const std::size_t n = std::size_t(pages_) * ad_ * ah_ * aw_ * channels_;
     const std::string storage = atlas.at("storage");
     quantization_bound_ = j.at("quantisation_error_bound").at("per_t");
-    if (storage == "u8") {
-      const auto q = Load<std::uint8_t>(dir / atlas.at("file").get<std::string>(), n);
-      tex_.resize(n);
-      for (std::size_t i = 0; i < n; ++i) tex_[i] = q[i] / 255.0f;
-    } else if (storage == "f16") {
-      const auto q = Load<std::uint16_t>(dir / atlas.at("file").get<std::string>(), n);
-      tex_.resize(n);
-      for (std::size_t i = 0; i < n; ++i) tex_[i] = HalfToFloat(q[i]);
-    } else {
-      ThrowBadInput("'{}': unknown atlas storage '{}'", dir.string(), storage);
-    }
-    terms_ = Load<float>(dir / j.at("terms").at("file").get<std::string>(), std::size_t(height_) * width_ * (1 + functions_));
-    index_ = Load<std::uint16_t>(dir / j.at("cluster_index").at("file").get<std::string>(), std::size_t(height_) * width_);
+    tex_ = LoadNormalised(dir / atlas.at("file").get<std::string>(), storage, n);
+    terms_ = LoadExportFile<float>(dir / j.at("terms").at("file").get<std::string>(), std::size_t(height_) * width_ * (1 + functions_));
+    index_ = LoadExportFile<std::uint16_t>(dir / j.at("cluster_index").at("file").get<std::string>(), std::size_t(height_) * width_);
     for (auto k : index_)
       if (k >= clusters_) ThrowBadInput("'{}': cluster index {} >= {}", dir.string(), k, clusters_);
   }
@@ -120,16 +102,6 @@ class SchneiderReferenceDecoder {
   }
 
  private:
-  template <typename T>
-  static std::vector<T> Load(const std::filesystem::path& path, std::size_t count) {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) ThrowIo("cannot open '{}'", path.string());
-    std::vector<T> v(count);
-    in.read(reinterpret_cast<char*>(v.data()), static_cast<std::streamsize>(count * sizeof(T)));
-    if (in.gcount() != static_cast<std::streamsize>(count * sizeof(T)) || in.peek() != EOF)
-      ThrowBadInput("'{}' does not hold exactly {} values of {} bytes", path.string(), count, sizeof(T));
-    return v;
-  }
   // Normalised value t of texel (sv, tv, z) of function g (its tile in the atlas).
   double Texel(int g, int z, int tv, int sv, int ch) const {
     const int per_page = tiles_x_ * tiles_y_, page = g / per_page, tx = g % tiles_x_, ty = (g / tiles_x_) % tiles_y_;

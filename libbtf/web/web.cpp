@@ -17,6 +17,9 @@
 
 #include "libbtf/core/atomic_file.h"
 #include "libbtf/core/error.h"
+#include "libbtf/export/sattler_reference_decoder.h"
+#include "libbtf/export/schneider.h"
+#include "libbtf/export/schneider_reference_decoder.h"
 #include "libbtf/io/dataset_io.h"
 #include "libbtf/io/file_kind.h"
 
@@ -24,9 +27,11 @@ namespace btf {
 
 namespace {
 
+// Owns the reference decoder of one layout.
+template <typename Decoder>
 class ExportBtfEvaluator final : public BtfEvaluator {
  public:
-  explicit ExportBtfEvaluator(const SchneiderReferenceDecoder& d) : d_(d) {}
+  explicit ExportBtfEvaluator(const std::filesystem::path& dir) : d_(dir) {}
   int channels() const override { return d_.channels(); }
   bool cos_theta_i_included() const override { return d_.cos_theta_i_included(); }
   void Eval(const Vec2& uv, const Vec3& wi, const Vec3& wo, float* out) const override {
@@ -37,7 +42,7 @@ class ExportBtfEvaluator final : public BtfEvaluator {
   }
 
  private:
-  const SchneiderReferenceDecoder& d_;
+  const Decoder d_;
 };
 
 nlohmann::json Vec(const Vec3& v) { return {v.x(), v.y(), v.z()}; }
@@ -181,8 +186,12 @@ nlohmann::json ViewerSceneJson(const RenderOptions& o, double exposure) {
           {"environment", {{"name", o.environment}, {"directions", dirs}, {"radiance_solid_angle", rad}}}};
 }
 
-std::unique_ptr<BtfEvaluator> ExportEvaluator(const SchneiderReferenceDecoder& decoder) {
-  return std::make_unique<ExportBtfEvaluator>(decoder);
+std::unique_ptr<BtfEvaluator> OpenExportEvaluator(const std::filesystem::path& dir) {
+  std::ifstream in(dir / "manifest.json");
+  const nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
+  if (!j.is_discarded() && j.is_object() && j.value("layout", "") == kSattlerLayout)
+    return std::make_unique<ExportBtfEvaluator<SattlerReferenceDecoder>>(dir);
+  return std::make_unique<ExportBtfEvaluator<SchneiderReferenceDecoder>>(dir);  // its errors name what is wrong
 }
 
 nlohmann::json CpuRenderSummary::ToJson() const {
@@ -203,8 +212,7 @@ CpuRenderSummary RenderCpu(const std::filesystem::path& source, const RenderOpti
   CpuRenderSummary s;
   Image img;
   if (std::filesystem::is_directory(source)) {
-    const SchneiderReferenceDecoder decoder(source);
-    img = Render(*ExportEvaluator(decoder), scene);
+    img = Render(*OpenExportEvaluator(source), scene);
     s.source_kind = "export";
   } else {
     const std::string format = FileFormatOf(source);

@@ -11,7 +11,6 @@
 #include <nlohmann/json.hpp>
 
 #include "libbtf/eval/render.h"
-#include "libbtf/export/schneider_reference_decoder.h"
 #include "libbtf/io/image_io.h"
 
 namespace btf {
@@ -29,9 +28,9 @@ Image ToneMap(const Image& linear, double exposure);
 // (camera, shape, tiles, light, background, environment samples, exposure, size).
 nlohmann::json ViewerSceneJson(const RenderOptions& options, double exposure);
 
-// An export folder as a BtfEvaluator (nearest texel for uv, as DatasetEvaluator). The decoder
-// must outlive the evaluator.
-std::unique_ptr<BtfEvaluator> ExportEvaluator(const SchneiderReferenceDecoder& decoder);
+// An export folder (either layout) as a BtfEvaluator through its reference decoder (nearest texel
+// for uv, as DatasetEvaluator).
+std::unique_ptr<BtfEvaluator> OpenExportEvaluator(const std::filesystem::path& export_dir);
 
 struct CpuRenderSummary {
   std::string output, source, source_kind, scene;  // source_kind: export, codec or dataset

@@ -72,10 +72,21 @@ TEST(BtfCompressTool, SceneAndPerViewPca) {
                              &out),
             0);
   EXPECT_NE(out.find("peak = max |input value|"), std::string::npos) << out;
-  // pca-view cannot be exported: usage error (2).
+  // pca-view exports in the sattler-2003 layout by default; --format schneider and the schneider
+  // grid options are usage errors (2) for it.
   EXPECT_EQ(test::RunCommand(test::Tool("btf-compress") + " export " + Q(dir / "c2.h5") + " -o " + Q(dir / "e") +
-                             " 2>/dev/null"),
+                             " --quiet"),
+            0);
+  EXPECT_EQ(nlohmann::json::parse(test::Slurp(dir / "e" / "manifest.json"))["layout"], "sattler-2003");
+  EXPECT_TRUE(std::filesystem::exists(dir / "e" / "btf_sattler.glsl"));
+  EXPECT_EQ(test::RunCommand(test::Tool("btf-compress") + " export " + Q(dir / "c2.h5") + " --format schneider -o " +
+                             Q(dir / "e2") + " 2>&1", &out),
             2);
+  EXPECT_NE(out.find("--format sattler"), std::string::npos) << out;
+  EXPECT_EQ(test::RunCommand(test::Tool("btf-compress") + " export " + Q(dir / "c2.h5") + " --view-grid 8 -o " +
+                             Q(dir / "e3") + " 2>&1", &out),
+            2);
+  EXPECT_NE(out.find("--view-grid"), std::string::npos) << out;
 }
 
 TEST(BtfCompressTool, ExitCodes) {

@@ -10,6 +10,8 @@
 #include <nlohmann/json.hpp>
 
 #include "libbtf/compress/codec.h"
+#include "libbtf/export/sattler_reference_decoder.h"
+#include "libbtf/export/schneider_reference_decoder.h"
 #include "libbtf/io/dataset_io.h"
 #include "libbtf/io/image_io.h"
 #include "tests/codec_util.h"
@@ -154,6 +156,55 @@ TEST(BtfEvalCli, SweepWritesResultsPlotsAndReport) {
             0);
   EXPECT_NE(out.find("PSNR dB"), std::string::npos) << out;
   EXPECT_NE(out.find(fmt::format("{:.2f}", j["points"][0]["errors"]["psnr_db"].get<double>())), std::string::npos) << out;
+}
+
+// --viewer: each method's rendered codec exported beside the report (lpca: schneider-2004,
+// pca-view: sattler-2003; fmf has no renderer export and is left out with a warning), the
+// viewer's page and three.js files copied byte for byte, and the report linking them. The
+// exports are read back by their reference decoders; the sattler one equals the kept codec's
+// Codec::Value (nearest texel) to its storage bound (+ 1e-5 for float arithmetic), at the
+// sampled directions. (The viewer drawing both layouts is tested in tests/web.)
+TEST(BtfEvalCli, SweepWithViewerExportsTheRenderedCodecsAndLinksTheViewer) {
+  const auto dir = test::TempDir();
+  WriteDataset(dir / "d.h5", test::MakeTestDataset(3, 4, 8, 8));
+  std::string out;
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-eval") + " sweep " + Q(dir / "d.h5") + " -o " + Q(dir / "sweep") +
+                                 " --methods pca-view,lpca,fmf --components 2 --clusters 2 --runs 1 --render-size 40"
+                                 " --viewer --json 2>" + Q(dir / "err.txt"),
+                             &out),
+            0);
+  const auto j = nlohmann::json::parse(out);
+  ASSERT_EQ(j["viewer_exports"].size(), 2u);
+  EXPECT_EQ(j["viewer_exports"][0]["layout"], "sattler-2003");
+  EXPECT_EQ(j["viewer_exports"][1]["layout"], "schneider-2004");
+  std::ifstream err(dir / "err.txt");
+  const std::string warnings((std::istreambuf_iterator<char>(err)), {});
+  EXPECT_NE(warnings.find("viewer: fmf_c2 is not exported"), std::string::npos) << warnings;
+  const auto viewer = dir / "sweep" / "viewer";
+  for (const char* f : {"index.html", "viewer.js", "node_modules/three/build/three.module.js",
+                        "node_modules/three/build/three.core.js", "node_modules/three/examples/jsm/controls/OrbitControls.js"})
+    EXPECT_EQ(test::Slurp(viewer / f), test::Slurp(std::filesystem::path(BTF_SOURCE_DIR) / "viewer" / f)) << f;
+  const std::string html = test::Slurp(dir / "sweep" / "report.html");
+  EXPECT_NE(html.find("<a href=\"viewer/index.html?export=exports/pca-view_c2/\">"), std::string::npos);
+  EXPECT_NE(html.find("<a href=\"viewer/index.html?export=exports/lpca_k2_c2/\">"), std::string::npos);
+  EXPECT_NE(html.find("<iframe title=\"viewer: pca-view_c2\""), std::string::npos);
+  EXPECT_NO_THROW(SchneiderReferenceDecoder{viewer / "exports" / "lpca_k2_c2"});
+  const SattlerReferenceDecoder ref(viewer / "exports" / "pca-view_c2");
+  const Codec codec = ReadCodec(dir / "sweep" / "codecs" / "pca-view_c2.h5");
+  for (int v = 0; v < codec.num_views(); ++v)
+    for (int l = 0; l < codec.num_lights(); ++l)
+      for (int y = 0; y < 8; ++y)
+        for (int x = 0; x < 8; ++x) {
+          float a[3], b[3];
+          ref.Value(x, y, codec.lights()[l], codec.views()[v], a);
+          codec.Value(Vec2((x + 0.5) / 8, 1 - (y + 0.5) / 8), codec.lights()[l], codec.views()[v], b, UvFilter::kNearest);
+          for (int c = 0; c < 3; ++c)
+            ASSERT_NEAR(a[c], b[c], ref.ErrorBound(codec.lights()[l], codec.views()[v]) + 1e-5);
+        }
+  // --viewer with --no-render has no rendered codecs to show: refused.
+  EXPECT_EQ(test::RunCommand(test::Tool("btf-eval") + " sweep " + Q(dir / "d.h5") + " -o " + Q(dir / "s2") +
+                                 " --components 2 --clusters 2 --runs 1 --no-render --viewer -q 2>&1", &out), 2);
+  EXPECT_NE(out.find("viewer_dir"), std::string::npos) << out;
 }
 
 TEST(BtfEvalCli, SweepPlotsEveryCodecMethodOnOneSetOfAxes) {

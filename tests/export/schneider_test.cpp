@@ -100,7 +100,8 @@ TEST(SchneiderExport, FilesHaveTheManifestShapes) {
   std::ifstream in(dir / "manifest.json");
   const auto j = nlohmann::json::parse(in);
   EXPECT_EQ(j["format"], "libbtf-schneider-export");
-  EXPECT_EQ(j["format_version"], "2.0.0");
+  EXPECT_EQ(j["format_version"], "2.1.0");
+  EXPECT_EQ(j["layout"], "schneider-2004");
   const auto shape = j["atlas"]["shape"];
   std::uint64_t n = 1;
   for (const auto& v : shape) n *= v.get<std::uint64_t>();

@@ -232,6 +232,7 @@ nlohmann::json RunPipeline(const fs::path& dir) {
       comp + " " + d + "synth.h5 --method pca-view --components 2 --log -o " + d + "pca_log.h5",
       comp + " decode " + d + "lpca.h5 -o " + d + "decoded.h5",
       comp + " export " + d + "lpca.h5 --format schneider -o " + d + "export",
+      comp + " export " + d + "pca.h5 --format sattler -o " + d + "export_sattler",
   };
   for (const auto& c : commands) {
     std::string out;

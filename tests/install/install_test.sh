@@ -24,7 +24,8 @@ fail() { echo "install test: FAILED: $*" >&2; exit 1; }
 
 cmake --install "$build" --prefix "$prefix" >"$work/install.log"
 for f in bin/btf-info bin/btf-synth lib/libbtf_core.a lib/libbtf_core.so lib/cmake/libbtf/libbtfConfig.cmake \
-         lib/pkgconfig/libbtf.pc include/libbtf/export/schneider_reference_decoder.h share/doc/libbtf/README.md \
+         lib/pkgconfig/libbtf.pc include/libbtf/export/schneider_reference_decoder.h \
+         include/libbtf/export/sattler_reference_decoder.h include/libbtf/export/export_reader.h share/doc/libbtf/README.md \
          share/doc/libbtf/errors.md; do
   [ -e "$prefix/$f" ] || fail "cmake --install did not install $f"
 done

@@ -1,6 +1,6 @@
 // Issue 17 "done when": the WebGL2 viewer in headless Chromium (Debian's chromium, software WebGL2
 // through SwiftShader) against the CPU renderer and the C++ reference decoder, on a small twill
-// LPCA export. Skips only when Chromium is absent (./run installs it, so CI runs these).
+// LPCA export and a pca-view export of the same twill. Skips only when Chromium is absent (./run installs it, so CI runs these).
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -9,6 +9,8 @@
 #include <random>
 
 #include "libbtf/compress/codec.h"
+#include "libbtf/export/sattler.h"
+#include "libbtf/export/sattler_reference_decoder.h"
 #include "libbtf/export/schneider.h"
 #include "libbtf/export/schneider_reference_decoder.h"
 #include "libbtf/synth/btf_generator.h"
@@ -24,23 +26,47 @@ namespace {
 // Irawan 2006 twill, bonn81 x bonn81, 16 x 16 texels (about 5 s), LPCA k = 4, c = 4; exported
 // on the default 16^2 x 16^2 grid (u8) into one atlas page, in `dir`; the codec file too when
 // `codec_file` is not empty.
-void TwillExport(const std::filesystem::path& dir, const std::filesystem::path& codec_file = {},
-                 const SchneiderExportOptions& options = {}) {
-  static const Codec codec = [] {
+const Dataset& Twill() {
+  static const Dataset d = [] {
     const auto model = MakeModel("irawan2006", "twill", nlohmann::json::object());
     BtfOptions bo;
     bo.resolution = 16;
     bo.samples = 1;
-    const Dataset d = test::GenerateDataset(*model, bo);
+    return test::GenerateDataset(*model, bo);
+  }();
+  return d;
+}
+
+void TwillExport(const std::filesystem::path& dir, const std::filesystem::path& codec_file = {},
+                 const SchneiderExportOptions& options = {}) {
+  static const Codec codec = [] {
     CompressOptions co;
     co.method = CodecMethod::kLpca;
     co.clusters = 4;
     co.components = 4;
-    return test::CompressDataset(d, co);
+    return test::CompressDataset(Twill(), co);
   }();
   ExportSchneider(options, codec, dir);
   if (!codec_file.empty()) WriteCodec(codec_file, codec);
 }
+
+// The same twill compressed with per-view PCA, c = 4 per view, exported in the sattler-2003
+// layout (u8, 81 x 5 images of 16 x 16 on two 256 x 256 layers).
+void TwillPcaViewExport(const std::filesystem::path& dir, const std::filesystem::path& codec_file = {},
+                        const SattlerExportOptions& options = {}) {
+  static const Codec codec = [] {
+    CompressOptions co;
+    co.method = CodecMethod::kPcaView;
+    co.components = 4;
+    return test::CompressDataset(Twill(), co);
+  }();
+  ExportSattler(options, codec, dir);
+  if (!codec_file.empty()) WriteCodec(codec_file, codec);
+}
+
+using Exporter = void (*)(const std::filesystem::path&, const std::filesystem::path&);
+void Lpca(const std::filesystem::path& dir, const std::filesystem::path& codec) { TwillExport(dir, codec); }
+void PcaView(const std::filesystem::path& dir, const std::filesystem::path& codec) { TwillPcaViewExport(dir, codec); }
 
 #define SKIP_WITHOUT_CHROMIUM()                                                                       \
   do {                                                                                                \
@@ -128,12 +154,13 @@ Agreement Compare(const RenderOptions& scene, const Image& cpu, const Image& web
 // too. Measured on this twill: mean 0.95 % (patch-point) and 0.47 % (cylinder-env) of the level,
 // largest pixel 15 % and 14 % (at highlights, where the two interpolants differ most); the
 // bounds are 2x those (max_mean, max_pixel).
-void ExpectSceneAgrees(const std::string& name, bool cpu_of_codec = false, double max_mean = 0.01, double max_pixel = 0.05) {
+void ExpectSceneAgrees(const std::string& name, bool cpu_of_codec = false, double max_mean = 0.01, double max_pixel = 0.05,
+                       Exporter exporter = Lpca, int width = 280, int height = 224) {
   SKIP_WITHOUT_CHROMIUM();
   const auto tmp = test::TempDir(), dir = tmp / "export", codec_file = tmp / "codec.h5";
-  TwillExport(dir, codec_file);
+  exporter(dir, codec_file);
   const std::filesystem::path cpu_source = cpu_of_codec ? codec_file : dir;
-  const RenderOptions scene = WebSceneOptions(name, 280, 224);
+  const RenderOptions scene = WebSceneOptions(name, width, height);
   // Exposure: the CPU image's 99th-percentile luminance at display value 0.8 (as ComparisonPanel).
   Image linear;
   RenderCpu(cpu_source, scene, 1.0, tmp / "probe.png", name, &linear);
@@ -146,25 +173,31 @@ void ExpectSceneAgrees(const std::string& name, bool cpu_of_codec = false, doubl
   const WebRenderSummary s = RenderWeb(BrowserOptions{}, scene, exposure, dir, tmp / "web.png", name);
   EXPECT_NE(s.renderer.find("SwiftShader"), std::string::npos) << s.renderer;
   const Image cpu = ReadImage(tmp / "cpu.png"), web = ReadImage(tmp / "web.png");
-  ASSERT_EQ(web.width, 280);
-  ASSERT_EQ(web.height, 224);
-  const SchneiderReferenceDecoder ref(dir);
-  const Agreement a = Compare(scene, cpu, web, ref.width(), ref.height());
-  std::cout << name << (cpu_of_codec ? " (CPU: codec)" : " (CPU: export)") << ": level " << a.level << ", mean |diff| " << 100 * a.mean_abs / a.level << " %, max inside "
+  ASSERT_EQ(web.width, width);
+  ASSERT_EQ(web.height, height);
+  const Agreement a = Compare(scene, cpu, web, Twill().width(), Twill().height());
+  std::cout << name << (exporter == PcaView ? " pca-view" : " lpca") << (cpu_of_codec ? " (CPU: codec)" : " (CPU: export)") << ": level " << a.level << ", mean |diff| " << 100 * a.mean_abs / a.level << " %, max inside "
             << 100 * a.max_abs_inside / a.level << " % over " << a.inside << " pixels (left out: " << a.silhouette
             << " silhouette, " << a.texel_edge << " texel-edge pixels; worst pixel " << a.worst_edge_distance
             << " texel from an edge), " << s.seconds << " s in the browser\n";
   EXPECT_GT(a.level, 0.5);  // the picture is not black (exposure maps the level to about 0.8)
   EXPECT_LE(a.mean_abs, max_mean * a.level);
   EXPECT_LE(a.max_abs_inside, max_pixel * a.level);
-  EXPECT_GT(a.inside, 280 * 224 / 2);
-  EXPECT_LT(a.texel_edge, 280 * 224 / 1000);  // the texel-edge exclusion stays small (< 0.1 % of the pixels)
+  EXPECT_GT(a.inside, width * height / 2);
+  EXPECT_LT(a.texel_edge, width * height / 1000);  // the texel-edge exclusion stays small (< 0.1 % of the pixels)
 }
 
 TEST(Browser, PatchPointAgreesWithTheCpuRender) { ExpectSceneAgrees("patch-point"); }
 TEST(Browser, CylinderEnvAgreesWithTheCpuRender) { ExpectSceneAgrees("cylinder-env"); }
 TEST(Browser, PatchPointOfTheExportIsCloseToTheCpuRenderOfTheCodec) { ExpectSceneAgrees("patch-point", true, 0.02, 0.30); }
 TEST(Browser, CylinderEnvOfTheExportIsCloseToTheCpuRenderOfTheCodec) { ExpectSceneAgrees("cylinder-env", true, 0.01, 0.30); }
+// The pca-view export (sattler-2003, btf_sattler.glsl) under the same tolerances; the sky at
+// 140 x 112 (its 128 lights x 2 x 81 direction dot products per pixel take 33 s in SwiftShader
+// at 280 x 224).
+TEST(Browser, PcaViewPatchPointAgreesWithTheCpuRender) { ExpectSceneAgrees("patch-point", false, 0.01, 0.05, PcaView); }
+TEST(Browser, PcaViewCylinderEnvAgreesWithTheCpuRender) {
+  ExpectSceneAgrees("cylinder-env", false, 0.01, 0.05, PcaView, 140, 112);
+}
 
 // btf_schneider.glsl evaluated in the browser (a float render target) against the reference
 // decoder. Queries: every texel at grid nodes of the view and light squares (where trilinear
@@ -235,6 +268,75 @@ TEST(Browser, GlslMatchesTheReferenceDecoderWithHalfFloatsOnTwoPages) {
   o.atlas_side = 64;
   o.light_grid = 8;
   ExpectGlslMatchesTheReferenceDecoder(o, 2);
+}
+
+// btf_sattler.glsl in the browser against SattlerReferenceDecoder at random (uv, wi, wo) and at
+// the sampled directions themselves (where one view and one light carry all the weight).
+// Error scale of a query: sum_a bv_a sum_f |sum_b bl_b terms[1 + f]| (ErrorBound / per_t). The
+// two differ by float32 against double arithmetic only, except where float32 and double pick
+// different "three nearest" directions (dot products tied to within float precision); those
+// queries are counted and asserted rare.
+void ExpectSattlerGlslMatchesTheReferenceDecoder(const SattlerExportOptions& options) {
+  SKIP_WITHOUT_CHROMIUM();
+  const auto dir = test::TempDir() / "export";
+  TwillPcaViewExport(dir, {}, options);
+  const SattlerReferenceDecoder ref(dir);
+  const Dataset& d = Twill();
+  std::vector<float> q;
+  std::vector<int> texel_x, texel_y;
+  auto add = [&](int x, int y, const Vec2& uv, const Vec3& wi, const Vec3& wo) {
+    for (double v : {uv.x(), uv.y(), wi.x(), wi.y(), wi.z(), wo.x(), wo.y(), wo.z()}) q.push_back(float(v));
+    texel_x.push_back(x), texel_y.push_back(y);
+  };
+  const int W = ref.width(), H = ref.height();
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> u01(0, 1);
+  for (int i = 0; i < 1024; ++i) {
+    const int x = int(u01(rng) * W) % W, y = int(u01(rng) * H) % H;
+    add(x, y, Vec2((x + 0.5) / W, 1 - (y + 0.5) / H), d.lights()[int(u01(rng) * d.num_lights()) % d.num_lights()],
+        d.views()[int(u01(rng) * d.num_views()) % d.num_views()]);
+  }
+  const std::size_t sampled_queries = texel_x.size();
+  for (int i = 0; i < 2048; ++i) {
+    const int x = int(u01(rng) * W) % W, y = int(u01(rng) * H) % H;
+    add(x, y, Vec2((x + 0.25 + 0.5 * u01(rng)) / W, 1 - (y + 0.25 + 0.5 * u01(rng)) / H),
+        HemisphereFromSquare(Vec2(u01(rng), u01(rng))), HemisphereFromSquare(Vec2(u01(rng), u01(rng))));
+  }
+  std::string renderer;
+  const std::vector<float> got = EvaluateInBrowser(BrowserOptions{}, dir, q, &renderer);
+  ASSERT_EQ(got.size(), texel_x.size() * 3);
+  double worst_sampled = 0, worst_any = 0;
+  int off = 0;
+  for (std::size_t i = 0; i < texel_x.size(); ++i) {
+    float want[3];
+    const Vec3 wi(q[i * 8 + 2], q[i * 8 + 3], q[i * 8 + 4]), wo(q[i * 8 + 5], q[i * 8 + 6], q[i * 8 + 7]);
+    ref.Value(texel_x[i], texel_y[i], wi, wo, want);
+    const double scale = ref.ErrorBound(wi, wo) / ref.quantization_bound();
+    double r = 0;
+    for (int c = 0; c < 3; ++c) r = std::max(r, std::abs(double(got[i * 3 + c]) - want[c]) / scale);
+    if (r > 0.1 * ref.quantization_bound()) {
+      ++off;
+      continue;
+    }
+    (i < sampled_queries ? worst_sampled : worst_any) = std::max(i < sampled_queries ? worst_sampled : worst_any, r);
+  }
+  std::cout << "sattler GLSL vs reference decoder (" << options.storage << "; " << renderer
+            << "): worst |diff| / scale = " << worst_sampled << " at sampled directions, " << worst_any
+            << " at random points; " << off << " of " << texel_x.size()
+            << " queries beyond a tenth of the storage bound per t " << ref.quantization_bound() << "\n";
+  EXPECT_LE(worst_sampled, 0.1 * ref.quantization_bound());
+  EXPECT_LE(worst_any, 0.1 * ref.quantization_bound());
+  EXPECT_LE(off, int(texel_x.size() / 200));  // nearest-three ties: at most 0.5 % of the queries
+}
+
+TEST(Browser, SattlerGlslMatchesTheReferenceDecoder) { ExpectSattlerGlslMatchesTheReferenceDecoder({}); }
+
+// Half floats (RGBA16F upload) on a 128-texel layer side: 64 images per layer, 7 layers.
+TEST(Browser, SattlerGlslMatchesTheReferenceDecoderWithHalfFloats) {
+  SattlerExportOptions o;
+  o.storage = "f16";
+  o.atlas_side = 128;
+  ExpectSattlerGlslMatchesTheReferenceDecoder(o);
 }
 
 }  // namespace

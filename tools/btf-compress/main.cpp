@@ -2,10 +2,11 @@
 // export (docs/btf-compress.md).
 //   btf-compress DATASET --method pca-view|lpca|lpca-tensor|fmf|dfmf [...] -o codec.h5
 //   btf-compress decode CODEC -o dataset.h5
-//   btf-compress export CODEC --format schneider -o DIR
+//   btf-compress export CODEC [--format schneider|sattler] -o DIR
 #include <optional>
 
 #include "libbtf/compress/codec.h"
+#include "libbtf/export/sattler.h"
 #include "libbtf/export/schneider.h"
 #include "libbtf/io/bonn.h"
 #include "tools/common/cli.h"
@@ -23,8 +24,9 @@ struct DecodeFlags {
 };
 
 struct ExportFlags {
-  std::string codec, output, format = "schneider";
+  std::string codec, output, format;  // schneider or sattler (CLI-checked); empty: by the codec's method
   btf::SchneiderExportOptions options;
+  bool grids_given = false;  // --view-grid / --light-grid (schneider only)
 };
 
 int RunCompress(const CLI::App& app, const btf::cli::CommonFlags& common, CompressFlags& f) {
@@ -62,10 +64,21 @@ int RunDecode(const CLI::App& app, const btf::cli::CommonFlags& common, const De
 
 int RunExport(const CLI::App& app, const btf::cli::CommonFlags& common, const ExportFlags& f) {
   btf::cli::RequireSingleRank("btf-compress export");
-  if (f.format != "schneider") btf::ThrowUsage("unknown export format '{}' (available: schneider)", f.format);
   const btf::Codec codec = btf::ReadCodec(f.codec);
-  const btf::SchneiderExportSummary s =
-      btf::ExportSchneider(f.options, codec, f.output, btf::cli::MakeReporter(common));
+  const std::string format =
+      !f.format.empty() ? f.format : codec.method() == btf::CodecMethod::kPcaView ? "sattler" : "schneider";
+  if (format == "schneider") {
+    const btf::SchneiderExportSummary s =
+        btf::ExportSchneider(f.options, codec, f.output, btf::cli::MakeReporter(common));
+    btf::cli::PrintSummary(app, common, s, {{"codec", f.codec}});
+    return 0;
+  }
+  if (f.grids_given) btf::ThrowUsage("--view-grid and --light-grid belong to --format schneider (sattler keeps the sampled directions)");
+  btf::SattlerExportOptions o;
+  o.components = f.options.components;
+  o.storage = f.options.storage;
+  o.atlas_side = f.options.atlas_side;
+  const btf::SattlerExportSummary s = btf::ExportSattler(o, codec, f.output, btf::cli::MakeReporter(common));
   btf::cli::PrintSummary(app, common, s, {{"codec", f.codec}});
   return 0;
 }
@@ -74,7 +87,7 @@ int RunExport(const CLI::App& app, const btf::cli::CommonFlags& common, const Ex
 
 int main(int argc, char** argv) {
   CLI::App app{"Compress a BTF dataset with per-view PCA (Sattler 2003) or local PCA (Mueller 2003); decode codecs; "
-               "export LPCA codecs for real-time rendering (Schneider 2004).",
+               "export LPCA (Schneider 2004) and pca-view (Sattler 2003) codecs for real-time rendering.",
                "btf-compress"};
   btf::cli::Configure(app);
   app.require_subcommand(0, 1);
@@ -115,22 +128,28 @@ int main(int argc, char** argv) {
   cd->add_option("-o,--output", df.output, "Output dataset (.h5)")->required();
 
   ExportFlags ef;
-  auto* ce = app.add_subcommand("export", "Export an LPCA codec for a renderer");
-  ce->add_option("CODEC", ef.codec, "Codec file (lpca)")->required();
-  ce->add_option("--format", ef.format, "Export format (schneider)");
-  ce->add_option("--view-grid", ef.options.view_grid, "Samples per side of the (s_v, t_v) square");
-  ce->add_option("--light-grid", ef.options.light_grid, "Samples per side of the (s_l, t_l) square");
-  ce->add_option("--components", ef.options.components, "Eigen-ABRDFs per cluster to export (-1 = all)");
+  auto* ce = app.add_subcommand("export", "Export an LPCA or pca-view codec for a renderer");
+  ce->add_option("CODEC", ef.codec, "Codec file (lpca or pca-view)")->required();
+  ce->add_option("--format", ef.format, "Export format: schneider (lpca) or sattler (pca-view); default: by the codec's method")
+      ->check(CLI::IsMember({"schneider", "sattler"}));
+  auto* vg = ce->add_option("--view-grid", ef.options.view_grid, "schneider: samples per side of the (s_v, t_v) square");
+  auto* lg = ce->add_option("--light-grid", ef.options.light_grid, "schneider: samples per side of the (s_l, t_l) square");
+  ce->add_option("--components", ef.options.components,
+                 "Eigen-ABRDFs per cluster (schneider) or eigen-textures per view (sattler) to export (-1 = all)");
   ce->add_option("--storage", ef.options.storage, "Atlas values: u8 (8-bit unsigned normalised) or f16 (half floats)")
       ->check(CLI::IsMember({"u8", "f16"}));
   ce->add_option("--atlas-side", ef.options.atlas_side,
-                 "Largest atlas side in texels (3D texture width, height and depth; WebGL2 guarantees 256)");
+                 "Largest atlas side in texels (schneider: 3D texture width, height and depth, WebGL2 guarantees 256; "
+                 "sattler: texture-array layer width and height, WebGL2 guarantees 2048)");
   ce->add_option("-o,--output", ef.output, "Output folder")->required();
   btf::cli::MarkDistributed(&app);  // compressing with pca-view or lpca; decode and export refuse
 
   return btf::cli::Main(argc, argv, app, [&] {
     if (cd->parsed()) return RunDecode(app, common, df);
-    if (ce->parsed()) return RunExport(app, common, ef);
+    if (ce->parsed()) {
+      ef.grids_given = vg->count() + lg->count() > 0;
+      return RunExport(app, common, ef);
+    }
     return RunCompress(app, common, cf);
   });
 }

@@ -17,7 +17,7 @@ struct CompareFlags {
 
 struct SweepFlags {
   std::string dataset, output;
-  bool no_render = false, no_codecs = false;
+  bool no_render = false, no_codecs = false, viewer = false;
   btf::SweepOptions options;
 };
 
@@ -109,6 +109,7 @@ int RunSweep(const CLI::App& app, const btf::cli::CommonFlags& common, SweepFlag
   btf::SweepOptions& o = f.options;
   o.render = !f.no_render;
   o.keep_codecs = !f.no_codecs;
+  if (f.viewer) o.viewer_dir = btf::ViewerDir(btf::BrowserOptions{}, /*need_playwright=*/false).string();
   o.render_options.height = std::max(8, o.render_options.width * 4 / 5);
   for (int i = 0; i < argc; ++i) o.command_line += (i ? " " : "") + std::string(i ? argv[i] : "btf-eval");
   const btf::SweepSummary s = btf::RunSweep(o, f.dataset, f.output, btf::cli::MakeReporter(common));
@@ -170,6 +171,9 @@ int main(int argc, char** argv) {
   sweep->add_flag("--no-ssim", [&](std::int64_t) { so.ssim = false; }, "Skip SSIM");
   sweep->add_flag("--no-render", sf.no_render, "Leave the rendered comparison out of the report");
   sweep->add_flag("--no-codecs", sf.no_codecs, "Do not keep the codec files in DIR/codecs");
+  sweep->add_flag("--viewer", sf.viewer,
+                  "Export the rendered lpca/pca-view codecs into DIR/viewer/exports and copy the WebGL2 viewer beside "
+                  "the report, which links it");
   sweep->add_option("--render-size", so.render_options.width, "Width of each rendered image in pixels (height = 4/5)");
   btf::cli::AddCommonFlags(*sweep, common);
 

@@ -8,7 +8,8 @@
 
 #include "libbtf/compress/codec.h"
 #include "libbtf/core/version.h"
-#include "libbtf/export/schneider_reference_decoder.h"  // installed, header-only: must compile here
+#include "libbtf/export/sattler_reference_decoder.h"    // installed, header-only: must compile here
+#include "libbtf/export/schneider_reference_decoder.h"  // (both layouts)
 #include "libbtf/io/dataset_io.h"
 
 int main(int argc, char** argv) {

@@ -1,0 +1,63 @@
+#pragma once
+// Pieces shared by the two renderer exports (schneider.cpp, sattler.cpp): binary files, the
+// normalised u8 / f16 storage of a value t in [0, 1], and the manifest blocks both carry.
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <filesystem>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "libbtf/compress/codec.h"
+#include "libbtf/core/atomic_file.h"
+#include "libbtf/export/half.h"
+
+namespace btf::export_detail {
+
+template <typename T>
+std::uint64_t WriteBinary(const std::filesystem::path& path, const std::vector<T>& data) {
+  WriteFileAtomic(path, data.data(), data.size() * sizeof(T));
+  return data.size() * sizeof(T);
+}
+
+// The normalised values of one export: u8 (t = q / 255) or f16 (half floats).
+class NormalisedStore {
+ public:
+  NormalisedStore(bool half, std::size_t n) : half_(half), u8_(half ? 0 : n), f16_(half ? n : 0) {}
+  // Stores t at `at`; returns the value a GPU reads back.
+  double Put(std::size_t at, double t) {
+    if (half_) {
+      f16_[at] = FloatToHalf(static_cast<float>(t));
+      return HalfToFloat(f16_[at]);
+    }
+    u8_[at] = static_cast<std::uint8_t>(std::clamp(std::lround(t * 255.0), 0L, 255L));
+    return u8_[at] / 255.0;
+  }
+  std::uint64_t Write(const std::filesystem::path& path) const {
+    return half_ ? WriteBinary(path, f16_) : WriteBinary(path, u8_);
+  }
+
+ private:
+  bool half_;
+  std::vector<std::uint8_t> u8_;
+  std::vector<std::uint16_t> f16_;
+};
+
+inline std::string WebGlFormat(bool half, int channels) {
+  return half ? (channels == 1 ? "R16F / RED / HALF_FLOAT" : "RGB16F / RGB / HALF_FLOAT")
+              : (channels == 1 ? "R8 / RED / UNSIGNED_BYTE" : "RGB8 / RGB / UNSIGNED_BYTE");
+}
+
+// "texture" and "values" of the manifest.
+inline nlohmann::json TextureJson(const Codec& codec) {
+  return {{"height", codec.height()}, {"width", codec.width()}, {"channels", codec.channels()},
+          {"channel_names", codec.info().channel_names}, {"row_0", "top (v = 1)"},
+          {"texel_of_uv", "x = floor(u * width), y = floor((1 - v) * height), wrapping"}};
+}
+inline nlohmann::json ValuesJson(const Codec& codec) {
+  return {{"units", codec.info().units}, {"color_space", codec.info().color_space},
+          {"cos_theta_i_included", codec.info().cos_theta_i_included}};
+}
+
+}  // namespace btf::export_detail
