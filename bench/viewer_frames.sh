@@ -17,7 +17,7 @@ mkdir -p "$out"
 "$bin/btf-compress" "$out/tw16.h5" --method pca-view --components 4 --quiet -o "$out/pv.h5"
 printf '%-34s %12s %10s\n' export "median ms" "min ms"
 for codec in lpca pv; do
-  "$bin/btf-compress" export "$out/$codec.h5" --quiet -o "$out/$codec-export"
+  "$bin/btf-compress" export "$out/$codec.h5" --quiet -o "$out/$codec-export" >/dev/null
   "$bin/btf-eval" render-web "$out/$codec-export" -o "$out/$codec.png" --scene patch-point --size 1280x720 \
     --frames "$frames" --json --quiet >"$out/$codec.json"
   python3 - "$out/$codec.json" "$codec" <<'PY'
