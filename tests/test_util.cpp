@@ -39,6 +39,8 @@ int RunCommand(const std::string& command, std::string* out) {
 
 std::string Tool(const std::string& name) { return std::string(BTF_TOOLS_DIR) + "/" + name; }
 
+std::string SourceDir() { return BTF_SOURCE_DIR; }
+
 Dataset MakeTestDataset(int views, int lights, int height, int width, int channels) {
   const Sampling all = Sampling::Bonn81();
   std::vector<int> vi, li;

@@ -20,6 +20,8 @@ std::string Slurp(const std::filesystem::path& path);
 
 // Path of a built tool, e.g. Tool("btf-info").
 std::string Tool(const std::string& name);
+// The source tree (sample_data/, viewer/, tests/golden/).
+std::string SourceDir();
 
 // The message of the btf::Error that f throws ("" if it throws none); its exit code in *code.
 inline std::string ErrorOf(const std::function<void()>& f, ExitCode* code = nullptr) {

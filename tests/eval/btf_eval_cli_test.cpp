@@ -183,7 +183,7 @@ TEST(BtfEvalCli, SweepWithViewerExportsTheRenderedCodecsAndLinksTheViewer) {
   const auto viewer = dir / "sweep" / "viewer";
   for (const char* f : {"index.html", "viewer.js", "node_modules/three/build/three.module.js",
                         "node_modules/three/build/three.core.js", "node_modules/three/examples/jsm/controls/OrbitControls.js"})
-    EXPECT_EQ(test::Slurp(viewer / f), test::Slurp(std::filesystem::path(BTF_SOURCE_DIR) / "viewer" / f)) << f;
+    EXPECT_EQ(test::Slurp(viewer / f), test::Slurp(std::filesystem::path(test::SourceDir()) / "viewer" / f)) << f;
   const std::string html = test::Slurp(dir / "sweep" / "report.html");
   EXPECT_NE(html.find("<a href=\"viewer/index.html?export=exports/pca-view_c2/\">"), std::string::npos);
   EXPECT_NE(html.find("<a href=\"viewer/index.html?export=exports/lpca_k2_c2/\">"), std::string::npos);

@@ -57,7 +57,7 @@ struct Digest {
 std::string g_run_dir;
 
 std::string ReplacePaths(std::string s) {
-  for (const auto& [from, to] : {std::pair<std::string, std::string>{g_run_dir, "<RUN>"}, {BTF_SOURCE_DIR, "<SRC>"}}) {
+  for (const auto& [from, to] : {std::pair<std::string, std::string>{g_run_dir, "<RUN>"}, {test::SourceDir(), "<SRC>"}}) {
     if (from.empty()) continue;
     for (std::size_t p = s.find(from); p != std::string::npos; p = s.find(from, p + to.size()))
       s.replace(p, from.size(), to);
@@ -225,7 +225,7 @@ nlohmann::json RunPipeline(const fs::path& dir) {
               "brdf.h5",
       synth + " photos --model irawan2006 --preset twill --directions bonn81 --views 0,7 --lights 0 --width 480 "
               "--height 360 --pixel-samples 1 --seed 5 -o " + d + "photos",
-      reg + " run " + std::string(BTF_SOURCE_DIR) + "/sample_data/photos/manifest.json -o " + d +
+      reg + " run " + test::SourceDir() + "/sample_data/photos/manifest.json -o " + d +
           "registered.h5 --resolution 16 --report " + d + "registration.json --contact-sheet " + d + "sheet.png",
       comp + " " + d + "synth.h5 --method pca-view --components 3 -o " + d + "pca.h5",
       comp + " " + d + "synth.h5 --method lpca --clusters 4 --components 3 --seed 7 -o " + d + "lpca.h5",
@@ -252,7 +252,7 @@ TEST(Golden, FixedSeedOutputsAreUnchanged) {
   const fs::path dir = test::TempDir();
   g_run_dir = dir.string();
   const nlohmann::json got = RunPipeline(dir);
-  const fs::path golden = fs::path(BTF_SOURCE_DIR) / "tests/golden/digests.json";
+  const fs::path golden = fs::path(test::SourceDir()) / "tests/golden/digests.json";
   if (const char* u = std::getenv("BTF_GOLDEN_UPDATE"); u && std::string(u) == "1") {
     std::ofstream(golden) << got.dump(2) << "\n";
     GTEST_SKIP() << "wrote " << golden;

@@ -85,7 +85,7 @@ TEST(ToolConventions, EveryJsonDocumentHasTheEnvelopeAndTimingSchema) {
   j = CheckEnvelope(test::Tool("btf-convert") + " " + d + "a.h5 -o " + d + "a.btf", "btf-convert");
   CheckSeconds(j["seconds"], "btf-convert");
   EXPECT_EQ(j["options"]["storage"], "float32");  // ConvertOptions' default
-  j = CheckEnvelope(test::Tool("btf-register") + " run " + std::string(BTF_SOURCE_DIR) +
+  j = CheckEnvelope(test::Tool("btf-register") + " run " + test::SourceDir() +
                         "/sample_data/photos/manifest.json --resolution 8 -o " + d + "reg.h5",
                     "btf-register");
   CheckSeconds(j["seconds"], "btf-register run");

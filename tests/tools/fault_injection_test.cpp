@@ -72,7 +72,7 @@ struct ToolCase {
 
 std::string Expand(std::string s, const fs::path& in, const fs::path& out) {
   for (const auto& [k, v] : {std::pair<std::string, std::string>{"{in}", in.string()}, {"{out}", out.string()},
-                             {"{src}", BTF_SOURCE_DIR}})
+                             {"{src}", test::SourceDir()}})
     for (std::size_t p = s.find(k); p != std::string::npos; p = s.find(k, p + v.size())) s.replace(p, k.size(), v);
   return s;
 }

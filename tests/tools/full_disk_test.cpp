@@ -87,7 +87,7 @@ TEST_F(FullDisk, EveryOtherWritingToolExitsFourAndKeepsTheOldOutput) {
   ExpectCleanFailure(synth + " brdf --views 0-80 --lights 0-80 -o " + (mnt_ / "b.h5").string(), mnt_ / "b.h5");
   ExpectCleanFailure(synth + " photos --views 0 --lights 0 --width 320 --height 240 -o " + (mnt_ / "photos").string(),
                      mnt_ / "photos", "manifest.json");
-  ExpectCleanFailure(test::Tool("btf-register") + " run " + BTF_SOURCE_DIR + "/sample_data/photos/manifest.json " +
+  ExpectCleanFailure(test::Tool("btf-register") + " run " + test::SourceDir() + "/sample_data/photos/manifest.json " +
                          "--resolution 32 -o " + (mnt_ / "r.h5").string(),
                      mnt_ / "r.h5");
   ExpectCleanFailure(comp + " export " + codec + " -o " + (mnt_ / "export").string(), mnt_ / "export", "manifest.json");
