@@ -78,7 +78,7 @@ void ApplyGamma(btf::ImageReadOptions& input, double gamma) {
 struct CalibrateFlags {
   std::vector<std::string> inputs;
   std::string board, output;
-  bool family_given = false, marker_corners = false;
+  bool family_given = false;
   double input_gamma = 0;
   btf::CalibrateOptions options;
 };
@@ -139,7 +139,6 @@ int RunDetect(const CLI::App& app, const btf::cli::CommonFlags& common, DetectFl
 int RunCalibrate(const CLI::App& app, const btf::cli::CommonFlags& common, CalibrateFlags& f) {
   btf::CalibrateOptions& o = f.options;
   o.family_override = f.family_given;
-  o.charuco_corners = !f.marker_corners;
   ApplyGamma(o.input, f.input_gamma);
   o.Check();
   const btf::Board board = btf::ReadBoard(f.board);
@@ -260,7 +259,7 @@ int main(int argc, char** argv) {
   auto* kbb = ck->add_option("--border-bits", ko.detector.border_bits, "Black tag border, modules (default: the board's)");
   ck->add_option("--min-markers", ko.min_markers, "Photos with fewer board markers are left out");
   ck->add_option("--min-corners", ko.min_corners, "Photos with fewer corners (marker or ChArUco) are left out");
-  ck->add_flag("--marker-corners", kf.marker_corners, "ChArUco board: calibrate on the markers' corners, not the chessboard's");
+  ck->add_flag("--charuco-corners", ko.charuco_corners, "ChArUco board: calibrate on its chessboard corners, not its markers'");
   ck->add_option("--min-views", ko.min_views, "Fewer usable photos is an error");
   ck->add_option("--outlier-factor", ko.outlier_factor, "Photos with RMS over this x the median are named outliers");
   add_input_flags(ck, ko.input, kf.input_gamma);
