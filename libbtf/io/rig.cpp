@@ -190,22 +190,29 @@ Board MakeAprilGridBoard(const AprilGrid& grid, const std::string& family, int b
   return b;
 }
 
+namespace {
+
+// OpenCV's PREDEFINED_DICTIONARY_NAME of a ChArUco dictionary name; bad input names `source`.
+int CharucoDictionary(const std::string& name, const std::string& source) {
+  const std::string names[] = {"DICT_4X4_50", "DICT_4X4_100", "DICT_4X4_250", "DICT_4X4_1000", "DICT_5X5_50",
+                               "DICT_5X5_100", "DICT_5X5_250", "DICT_5X5_1000", "DICT_6X6_50", "DICT_6X6_100",
+                               "DICT_6X6_250", "DICT_6X6_1000", "DICT_7X7_50", "DICT_7X7_100", "DICT_7X7_250",
+                               "DICT_7X7_1000", "DICT_ARUCO_ORIGINAL"};
+  for (int i = 0; i < static_cast<int>(std::size(names)); ++i)
+    if (name == names[i]) return i;  // OpenCV's PREDEFINED_DICTIONARY_NAME order
+  ThrowBadInput("'{}': field 'dictionary' is '{}': use one of DICT_4X4_50 .. DICT_7X7_1000, DICT_ARUCO_ORIGINAL",
+                source, name);
+}
+
+}  // namespace
+
 Board MakeCharucoBoard(const CharucoDefinition& c, const std::string& source) {
   if (c.squares_x < 2 || c.squares_y < 2 || c.squares_x * static_cast<long>(c.squares_y) > 100000)
     ThrowBadInput("'{}': fields 'squaresX' and 'squaresY' must be >= 2 (and at most 100000 squares)", source);
   if (!(c.square_mm > 0)) ThrowBadInput("'{}': field 'squareSize' must be > 0 (metres)", source);
   if (!(c.marker_mm > 0 && c.marker_mm < c.square_mm))
     ThrowBadInput("'{}': field 'markerSize' must be > 0 and below squareSize", source);
-  const std::string names[] = {"DICT_4X4_50", "DICT_4X4_100", "DICT_4X4_250", "DICT_4X4_1000", "DICT_5X5_50",
-                               "DICT_5X5_100", "DICT_5X5_250", "DICT_5X5_1000", "DICT_6X6_50", "DICT_6X6_100",
-                               "DICT_6X6_250", "DICT_6X6_1000", "DICT_7X7_50", "DICT_7X7_100", "DICT_7X7_250",
-                               "DICT_7X7_1000", "DICT_ARUCO_ORIGINAL"};
-  int dict = -1;
-  for (int i = 0; i < static_cast<int>(std::size(names)); ++i)
-    if (c.dictionary == names[i]) dict = i;  // OpenCV's PREDEFINED_DICTIONARY_NAME order
-  if (dict < 0)
-    ThrowBadInput("'{}': field 'dictionary' is '{}': use one of DICT_4X4_50 .. DICT_7X7_1000, DICT_ARUCO_ORIGINAL",
-                  source, c.dictionary);
+  const int dict = CharucoDictionary(c.dictionary, source);
   const cv::Ptr<cv::aruco::CharucoBoard> cb = cv::aruco::CharucoBoard::create(
       c.squares_x, c.squares_y, static_cast<float>(c.square_mm), static_cast<float>(c.marker_mm),
       cv::aruco::getPredefinedDictionary(static_cast<cv::aruco::PREDEFINED_DICTIONARY_NAME>(dict)));
@@ -229,6 +236,31 @@ Board MakeCharucoBoard(const CharucoDefinition& c, const std::string& source) {
   }
   b.Check(source);
   return b;
+}
+
+std::vector<Vec2> CharucoCornersMm(const CharucoDefinition& c) {
+  MakeCharucoBoard(c, "ChArUco definition");  // validates c and the dictionary
+  const cv::Ptr<cv::aruco::CharucoBoard> cb = cv::aruco::CharucoBoard::create(
+      c.squares_x, c.squares_y, static_cast<float>(c.square_mm), static_cast<float>(c.marker_mm),
+      cv::aruco::getPredefinedDictionary(cv::aruco::DICT_4X4_50));  // the corners do not depend on the dictionary
+  const double cx = 0.5 * c.squares_x * c.square_mm, cy = 0.5 * c.squares_y * c.square_mm;
+  std::vector<Vec2> out;
+  for (const auto& p : cb->chessboardCorners) out.emplace_back(p.x - cx, cy - p.y);  // as the markers above
+  return out;
+}
+
+std::vector<std::uint8_t> ArucoMarkerModules(const std::string& dictionary, int id, int border_bits, int* side) {
+  const cv::Ptr<cv::aruco::Dictionary> d = cv::aruco::getPredefinedDictionary(
+      static_cast<cv::aruco::PREDEFINED_DICTIONARY_NAME>(CharucoDictionary(dictionary, "ArUco marker")));
+  if (id < 0 || id >= d->bytesList.rows) ThrowUsage("marker id {} is outside {} (0..{})", id, dictionary, d->bytesList.rows - 1);
+  if (border_bits < 1 || border_bits > 2) ThrowUsage("invalid option 'border_bits': {} (1 or 2)", border_bits);
+  *side = d->markerSize + 2 * border_bits;
+  cv::Mat img;
+  cv::aruco::drawMarker(d, id, *side, img, border_bits);  // one pixel per module
+  std::vector<std::uint8_t> out(static_cast<std::size_t>(*side) * *side);
+  for (int r = 0; r < *side; ++r)
+    for (int c = 0; c < *side; ++c) out[static_cast<std::size_t>(r * *side + c)] = img.at<unsigned char>(r, c) > 127;
+  return out;
 }
 
 namespace {
@@ -582,6 +614,16 @@ std::vector<PhotoTruth> ReadTruth(const std::filesystem::path& path) {
       for (int q = 0; q < 4; ++q) corners[q] = c.At(static_cast<std::size_t>(q)).Vector2();
       if (!t.marker_corners_px.emplace(id, corners).second) mk["id"].Fail(fmt::format("duplicate marker id {}", id));
     }
+    if (p.Has("charuco_corners")) {
+      const Node cs = p["charuco_corners"];
+      const std::size_t nc = cs.ArraySize();
+      for (std::size_t k = 0; k < nc; ++k) {
+        const Node ck = cs.At(k);
+        const int id = ck["id"].Int();
+        if (!t.charuco_corners_px.emplace(id, ck["pixel_px"].Vector2()).second)
+          ck["id"].Fail(fmt::format("duplicate corner id {}", id));
+      }
+    }
     out.push_back(std::move(t));
   }
   return out;
@@ -601,11 +643,17 @@ void WriteTruth(const std::filesystem::path& path, const std::vector<PhotoTruth>
       for (const auto& p : corners) c.push_back(ToJson(p));
       jm.push_back(json{{"id", id}, {"corners_px", c}});
     }
-    ps.push_back(json{{"file", t.file},
-                      {"plate_to_image", ToJson(t.image_from_plate)},
-                      {"rotation", ToJson(t.camera_from_plate_rotation)},
-                      {"translation", ToJson(t.camera_from_plate_translation)},
-                      {"markers", jm}});
+    json jp{{"file", t.file},
+            {"plate_to_image", ToJson(t.image_from_plate)},
+            {"rotation", ToJson(t.camera_from_plate_rotation)},
+            {"translation", ToJson(t.camera_from_plate_translation)},
+            {"markers", jm}};
+    if (!t.charuco_corners_px.empty()) {
+      json jc = json::array();
+      for (const auto& [id, p] : t.charuco_corners_px) jc.push_back(json{{"id", id}, {"pixel_px", ToJson(p)}});
+      jp["charuco_corners"] = jc;
+    }
+    ps.push_back(jp);
   }
   j["photos"] = ps;
   WriteJsonAtomic(path, j);

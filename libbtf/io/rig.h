@@ -8,6 +8,7 @@
 // Pixel convention: OpenCV's, pixel centers at integer coordinates, (0,0) = center of the
 // top-left pixel, y down.
 #include <array>
+#include <cstdint>
 #include <filesystem>
 #include <map>
 #include <string>
@@ -65,6 +66,13 @@ struct Board {
 Board MakeAprilGridBoard(const AprilGrid& grid, const std::string& family = "tag36h11", int border_bits = 2);
 // The ArUco markers of a ChArUco board (family "aruco:DICT_..."); bad input names `source`.
 Board MakeCharucoBoard(const CharucoDefinition& charuco, const std::string& source);
+// The chessboard corners of a ChArUco board in plate mm (frame above), indexed by OpenCV 4.6's
+// corner id (CharucoBoard::chessboardCorners: (squares_x - 1) x (squares_y - 1) inner corners).
+std::vector<Vec2> CharucoCornersMm(const CharucoDefinition& charuco);
+// The module grid of ArUco marker `id` of `dictionary` (a ChArUco dictionary name, "DICT_5X5_100") with a
+// black border of `border_bits` modules, through OpenCV's drawMarker: side x side modules (*side set),
+// row-major, row 0 = top of the upright marker, 1 = white.
+std::vector<std::uint8_t> ArucoMarkerModules(const std::string& dictionary, int id, int border_bits, int* side);
 
 struct CameraModel {
   int width = 0, height = 0;
@@ -132,6 +140,7 @@ struct PhotoTruth {
   Eigen::Matrix3d camera_from_plate_rotation = Eigen::Matrix3d::Identity();        // camera_from_plate
   Vec3 camera_from_plate_translation = Vec3::Zero();                               // camera_from_plate, mm
   std::map<int, std::array<Vec2, 4>> marker_corners_px;          // visible markers only
+  std::map<int, Vec2> charuco_corners_px;  // ChArUco boards: chessboard corner id -> px (visible corners only)
 };
 
 // Readers validate every field and throw btf::Error (bad input) naming file, entry and field.

@@ -46,6 +46,7 @@ void CalibrateOptions::Check() const {
   detector.Check();
   input.Check();
   BTF_CHECK_OPTION(min_markers >= 1, "min-markers", ">= 1");
+  BTF_CHECK_OPTION(min_corners >= 4, "min-corners", ">= 4");
   BTF_CHECK_OPTION(min_views >= 3, "min-views", ">= 3 (a planar board needs at least 3 views)");
   BTF_CHECK_OPTION(std::isfinite(outlier_factor) && outlier_factor > 1, "outlier-factor", "> 1");
 }
@@ -69,7 +70,7 @@ nlohmann::json CalibrateSummary::ToJson() const {
   cam["rms_px"] = camera.rms_px;
   nlohmann::json vs = nlohmann::json::array();
   for (const auto& v : views) {
-    nlohmann::json j = {{"file", v.file}, {"used", v.used}, {"markers", v.markers}};
+    nlohmann::json j = {{"file", v.file}, {"used", v.used}, {"markers", v.markers}, {"corners", v.corners}};
     if (v.used) j["rms_px"] = v.rms_px, j["outlier"] = v.outlier;
     if (!v.error.empty()) j["error"] = v.error;
     vs.push_back(j);
@@ -90,7 +91,8 @@ std::string CalibrateSummary::Report() const {
                      camera.fisheye_k[2], camera.fisheye_k[3]);
   for (const auto& v : views) {
     if (v.used)
-      r += fmt::format("  {}: {} markers, RMS {:.4f} px{}\n", v.file, v.markers, v.rms_px, v.outlier ? "  OUTLIER" : "");
+      r += fmt::format("  {}: {} markers, {} corners, RMS {:.4f} px{}\n", v.file, v.markers, v.corners, v.rms_px,
+                       v.outlier ? "  OUTLIER" : "");
     else
       r += fmt::format("  {}: left out: {}\n", v.file, v.error);
   }
@@ -111,6 +113,7 @@ CalibrateSummary CalibrateCamera(const CalibrateOptions& o, const std::vector<st
   TagDetectorOptions dopt = o.detector;
   if (!o.family_override) dopt.family = board.family, dopt.border_bits = board.border_bits;
   const TagDetector detector(dopt);
+  const bool charuco = board.charuco.valid() && o.charuco_corners && dopt.family == board.family;
   std::map<int, const Marker*> by_id;
   for (const auto& m : board.markers) by_id[m.id] = &m;
   // calibrateCamera's planar initialisation wants z = 0: markers all at one height are shifted there.
@@ -143,17 +146,27 @@ CalibrateSummary CalibrateCamera(const CalibrateOptions& o, const std::vector<st
     }
     std::vector<cv::Point3f> obj;
     std::vector<cv::Point2f> img;
-    for (const auto& d : detector.Detect(im)) {
+    const std::vector<TagDetection> dets = detector.Detect(im);
+    for (const auto& d : dets) {
       const auto it = by_id.find(d.id);
       if (it == by_id.end()) continue;
       ++v.markers;
-      for (int k = 0; k < 4; ++k) {
+      for (int k = 0; k < 4 && !charuco; ++k) {
         obj.emplace_back(static_cast<float>(it->second->corners_mm[k].x()), static_cast<float>(it->second->corners_mm[k].y()), 0.0f);
         img.emplace_back(static_cast<float>(d.corners[k].x()), static_cast<float>(d.corners[k].y()));
       }
     }
+    if (charuco)
+      for (const auto& c : DetectCharucoCorners(im, board.charuco, dets)) {
+        obj.emplace_back(static_cast<float>(c.board_mm.x()), static_cast<float>(c.board_mm.y()), 0.0f);
+        img.emplace_back(static_cast<float>(c.pixel.x()), static_cast<float>(c.pixel.y()));
+      }
+    v.corners = static_cast<int>(obj.size());
     if (v.markers < o.min_markers) {
       v.error = fmt::format("{} board markers found, at least {} needed (min_markers)", v.markers, o.min_markers);
+    } else if (v.corners < o.min_corners) {
+      v.error = fmt::format("{} {}corners found, at least {} needed (min_corners)", v.corners,
+                            charuco ? "chessboard " : "", o.min_corners);
     } else {
       v.used = true;
       object.push_back(std::move(obj));

@@ -1,6 +1,7 @@
 #pragma once
 // Camera calibration from photos of a board (btf-register calibrate): markers detected as in
-// registration, every detected corner of a board marker paired with its plate position, then
+// registration, every detected corner of a board marker (of a ChArUco board: every chessboard
+// corner, DetectCharucoCorners, with charuco_corners) paired with its plate position, then
 // OpenCV's calibrateCamera (radtan: k1, k2, p1, p2, k3) or cv::fisheye::calibrate (k1..k4).
 // Pixel convention: OpenCV's (as detection), so fx, fy, cx, cy are directly OpenCV's.
 #include <filesystem>
@@ -23,6 +24,9 @@ struct CalibrateOptions {
   bool family_override = false;
   ImageReadOptions input;         // decoding of integer photos (a manifest's transfer is used when "auto")
   int min_markers = 4;            // photos with fewer board markers found are left out (named in the summary)
+  bool charuco_corners = false;   // a ChArUco board: calibrate on its chessboard corners (DetectCharucoCorners)
+                                  // instead of its markers' corners (off: less precise today, docs/btf-register.md)
+  int min_corners = 8;            // photos with fewer corners (marker or chessboard) found are left out
   int min_views = 3;              // fewer usable photos: btf::Error (bad input)
   double outlier_factor = 3;      // a photo whose RMS exceeds this x the median (and 0.2 px) is named an outlier
   void Check() const;
@@ -33,6 +37,7 @@ struct CalibrationView {
   bool used = false;
   std::string error;      // why the photo was left out
   int markers = 0;        // board markers found
+  int corners = 0;        // corners paired with the board (4 per marker, or ChArUco chessboard corners)
   double rms_px = 0;      // reprojection RMS of this photo's corners
   bool outlier = false;
 };

@@ -21,6 +21,7 @@
 #include <apriltag/tagStandard41h12.h>
 #include <apriltag/tagStandard52h13.h>
 #include <opencv2/aruco.hpp>
+#include <opencv2/aruco/charuco.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -479,6 +480,65 @@ bool RefineTagCorners(const std::vector<float>& gray, int w, int h, int modules,
     c = refined;
   }
   return true;
+}
+
+void CharucoOptions::Check() const {
+  BTF_CHECK_OPTION(max_window_px >= 2 && max_window_px <= 64, "max_window_px", "2..64");
+  BTF_CHECK_OPTION(std::isfinite(max_move_px) && max_move_px > 0, "max_move_px", "> 0");
+  BTF_CHECK_OPTION(std::isfinite(border_margin_px) && border_margin_px >= 0, "border_margin_px", ">= 0");
+}
+
+std::vector<CharucoCorner> DetectCharucoCorners(const Image& image, const CharucoDefinition& def,
+                                                const std::vector<TagDetection>& markers, const CharucoOptions& o) {
+  o.Check();
+  const std::vector<Vec2> board_mm = CharucoCornersMm(def);  // validates the definition
+  const cv::Ptr<cv::aruco::CharucoBoard> board = cv::aruco::CharucoBoard::create(
+      def.squares_x, def.squares_y, static_cast<float>(def.square_mm), static_cast<float>(def.marker_mm),
+      cv::aruco::getPredefinedDictionary(
+          static_cast<cv::aruco::PREDEFINED_DICTIONARY_NAME>(FindAruco(kArucoPrefix + def.dictionary))));
+  // Back to OpenCV's marker corner order (TL, TR, BR, BL of the marker as drawn = our LT, RT, RB, LB).
+  std::vector<std::vector<cv::Point2f>> corners;
+  std::vector<int> ids;
+  const int n_markers = static_cast<int>(board->ids.size());
+  for (const auto& d : markers) {
+    if (d.id < 0 || d.id >= n_markers) continue;
+    std::vector<cv::Point2f> c;
+    for (int k = 3; k >= 0; --k) c.emplace_back(static_cast<float>(d.corners[k].x()), static_cast<float>(d.corners[k].y()));
+    corners.push_back(std::move(c));
+    ids.push_back(d.id);
+  }
+  std::vector<CharucoCorner> out;
+  if (ids.empty()) return out;
+  const int w = image.width, h = image.height;
+  const std::vector<float> gray = LinearGray(image);
+  const std::vector<unsigned char> gray8 = Quantize(gray);
+  const cv::Mat im8(h, w, CV_8UC1, const_cast<unsigned char*>(gray8.data()));
+  std::vector<cv::Point2f> first;
+  std::vector<int> first_ids;
+  cv::aruco::interpolateCornersCharuco(corners, ids, im8, board, first, first_ids);
+  const cv::Mat imf(h, w, CV_32FC1, const_cast<float*>(gray.data()));
+  for (std::size_t i = 0; i < first.size(); ++i) {
+    // The nearest marker corner bounds the window: cornerSubPix assumes the window holds the
+    // corner's two edges only.
+    double nearest = 1e30;
+    for (const auto& c : corners)
+      for (const auto& p : c) nearest = std::min(nearest, std::hypot(double(p.x) - first[i].x, double(p.y) - first[i].y));
+    const int half = std::clamp(static_cast<int>(0.7 * nearest / std::sqrt(2.0)), 2, o.max_window_px);
+    std::vector<cv::Point2f> p = {first[i]};
+    if (!(p[0].x >= half + 1 && p[0].y >= half + 1 && p[0].x <= w - 2 - half && p[0].y <= h - 2 - half)) continue;
+    cv::cornerSubPix(imf, p, cv::Size(half, half), cv::Size(-1, -1),
+                     cv::TermCriteria(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 100, 1e-4));
+    if (std::hypot(double(p[0].x) - first[i].x, double(p[0].y) - first[i].y) > o.max_move_px) continue;
+    const double m = o.border_margin_px;
+    if (!(p[0].x >= m && p[0].y >= m && p[0].x <= w - 1 - m && p[0].y <= h - 1 - m)) continue;
+    CharucoCorner c;
+    c.id = first_ids[i];
+    c.pixel = Vec2(p[0].x, p[0].y);
+    c.board_mm = board_mm[static_cast<std::size_t>(c.id)];
+    out.push_back(c);
+  }
+  std::sort(out.begin(), out.end(), [](const CharucoCorner& a, const CharucoCorner& b) { return a.id < b.id; });
+  return out;
 }
 
 std::vector<TagDetection> TagDetector::Detect(const Image& image) const {

@@ -19,6 +19,7 @@
 
 #include "libbtf/core/directions.h"
 #include "libbtf/io/image_io.h"
+#include "libbtf/io/rig.h"
 
 namespace btf {
 
@@ -90,6 +91,29 @@ class TagDetector {
 // corner would move by more than `max_move_px`.
 bool RefineTagCorners(const std::vector<float>& gray, int width, int height, int modules, std::array<Vec2, 4>* corners,
                       double max_move_px = 3.0);
+
+// ChArUco chessboard corners (OpenCV 4.6 aruco): the board's markers, detected by a TagDetector of
+// its family ("aruco:DICT_..."), give each inner corner a first position through the local
+// homography of its two nearest markers (cv::aruco::interpolateCornersCharuco, both markers
+// needed); then cv::cornerSubPix on the linear gray image, in a window that stays clear of the
+// markers (half-size = 0.7 x the distance to the nearest marker corner / sqrt 2, 2..max_window_px).
+// Same pixel convention as the tags (OpenCV's: (0,0) = centre of the top-left pixel).
+struct CharucoCorner {
+  int id = 0;                 // OpenCV's chessboard corner id (CharucoBoard::chessboardCorners)
+  Vec2 pixel = Vec2::Zero();  // px, OpenCV convention
+  Vec2 board_mm = Vec2::Zero();  // plate mm (libbtf/io/rig.h frame: origin at the board's centre, y up), z = 0
+};
+struct CharucoOptions {
+  int max_window_px = 12;     // cornerSubPix half-window cap
+  double max_move_px = 2;     // a corner cornerSubPix moves further than this from the interpolation is dropped
+  double border_margin_px = 2;  // corners closer than this to the image edge are dropped
+  void Check() const;
+};
+// `markers`: detections of the board's family on `image` (ids not on the board are ignored).
+// Sorted by id.
+std::vector<CharucoCorner> DetectCharucoCorners(const Image& image, const CharucoDefinition& board,
+                                                const std::vector<TagDetection>& markers,
+                                                const CharucoOptions& options = {});
 
 // Linear gray (Rec.709 luminance for 3+ channels) scaled so the 99.5th percentile maps to 255.
 // Stays linear on purpose: AprilTag thresholds at the mid level, and under a symmetric blur the

@@ -146,6 +146,25 @@ void ApplyResponse(Image& codes, const ResponseCurve& curve, const std::string& 
     codes.pixels[i] = CodeToLinear(curve, static_cast<int>(i % static_cast<std::size_t>(codes.channels)), codes.pixels[i]);
 }
 
+bool IsClipped(float stored, const ResponseCurve& curve, const HdrOptions& o) {
+  if (!(stored < o.saturation)) return true;                                 // clipped (NaN too)
+  return !curve.empty() && 255.0 * stored > curve.max_code + 0.5;           // beyond the curve's data: as clipped
+}
+
+HdrMerge ClippedPixels(const Image& stored, const ResponseCurve& curve, const HdrOptions& o) {
+  HdrMerge m;
+  m.clipped = Image(stored.width, stored.height, 1);
+  const std::size_t np = static_cast<std::size_t>(stored.width) * stored.height;
+  const int C = stored.channels;
+  for (std::size_t p = 0; p < np; ++p)
+    for (int c = 0; c < C; ++c)
+      if (IsClipped(stored.pixels[p * C + c], curve, o)) {
+        m.clipped.pixels[p] = 1, ++m.clipped_pixels;
+        break;
+      }
+  return m;
+}
+
 HdrMerge MergeBracket(const std::vector<Image>& stored, const std::vector<double>& exposures,
                       const std::vector<std::string>& files, const ResponseCurve& curve, const HdrOptions& o,
                       const Image* dark) {
@@ -173,8 +192,7 @@ HdrMerge MergeBracket(const std::vector<Image>& stored, const std::vector<double
         double v = s;
         if (!curve.empty()) v = CodeToLinear(curve, c, s);
         if (dark) v -= dark->pixels[i];
-        if (!(s < o.saturation)) continue;  // clipped (NaN too)
-        if (!curve.empty() && 255.0 * s > curve.max_code + 0.5) continue;  // beyond the curve's data: as clipped
+        if (IsClipped(s, curve, o)) continue;
         const double e = exposures[k];
         if (s <= o.dark || (!curve.empty() && 255.0 * s < curve.min_code - 0.5)) {  // dark, or below the curve's data
           if (e > dark_best_e) dark_best_e = e, dark_value = v / e;

@@ -195,6 +195,7 @@ json PhotoReport::ToJson() const {
     }
   }
   if (exposures > 1) j["bracket"] = {{"exposures", exposures}, {"clipped_pixels", hdr_clipped_pixels}};
+  else if (hdr_clipped_pixels > 0) j["clipped_pixels"] = hdr_clipped_pixels;
   if (ok) {
     j["masked_texels"] = {{"hidden_by_markers", masked_hidden}, {"clipped", masked_clipped}};
     j["invalid_texel_fraction"] = invalid_fraction;
@@ -241,7 +242,7 @@ std::string RegisterSummary::Report() const {
   std::size_t hidden = 0, clipped = 0;
   for (const auto& p : reports) hidden += p.masked_hidden, clipped += p.masked_clipped;
   if (hidden + clipped > 0)
-    r += fmt::format("masked texels: {} hidden behind raised markers, {} clipped in every exposure ({})\n", hidden, clipped,
+    r += fmt::format("masked texels: {} hidden behind raised markers, {} clipped ({})\n", hidden, clipped,
                      reference_view >= 0 ? "left out of tile averaging" : "filled from the nearest unmasked texel");
   for (const auto& p : reports)
     if (!p.ok) r += fmt::format("FAILED {}: {}\n", p.file, p.error);
@@ -250,9 +251,13 @@ std::string RegisterSummary::Report() const {
 }
 
 std::vector<TagDetection> DetectInImage(const std::filesystem::path& image, const TagDetectorOptions& options,
-                                        const ImageReadOptions& input) {
+                                        const ImageReadOptions& input, const CharucoDefinition* charuco,
+                                        std::vector<CharucoCorner>* charuco_corners) {
   TagDetector det(options);
-  return det.Detect(ReadPhoto(image, nullptr, input));
+  const Image im = ReadPhoto(image, nullptr, input);
+  std::vector<TagDetection> dets = det.Detect(im);
+  if (charuco && charuco_corners) *charuco_corners = DetectCharucoCorners(im, *charuco, dets);
+  return dets;
 }
 
 namespace {
@@ -502,7 +507,11 @@ class Registration {
     *exposure_out = e.exposure;
     HdrMerge m;
     if (e.brackets.empty()) {
-      m.radiance = ReadPhoto(dir_ / e.file, warnings, input_);
+      const Image stored = ReadPhoto(dir_ / e.file, warnings, input_);
+      // An integer photo's saturated pixels (as a bracket's: stored value >= hdr.saturation of full
+      // scale) have no value: masked like a bracket's pixels clipped in every exposure.
+      if (manifest_.bit_depth > 0) m = ClippedPixels(stored, sum_.response, o_.hdr);
+      m.radiance = stored;
       if (!sum_.response.empty()) ApplyResponse(m.radiance, sum_.response, e.file);
       Correct(m.radiance, e.file, true);
       return m;
@@ -636,7 +645,7 @@ class Registration {
     Image tex = Rectify(merged.radiance, project, S_, o_.rectify, &st);
     *mask = MarkerMask(board_, g, tex.width);
     r.masked_hidden = static_cast<std::size_t>(std::count(mask->begin(), mask->end(), 1));
-    if (merged.clipped_pixels > 0) {  // a texel touching a pixel clipped in every exposure has no value
+    if (merged.clipped_pixels > 0) {  // a texel touching a clipped pixel (every exposure of a bracket) has no value
       const Image clipped = Rectify(merged.clipped, project, S_, o_.rectify);
       for (std::size_t i = 0; i < mask->size(); ++i)
         if (clipped.pixels[i] > 0) r.masked_clipped += 1, (*mask)[i] = 1;
@@ -644,12 +653,13 @@ class Registration {
     if (std::count(mask->begin(), mask->end(), 0) == 0) {
       std::string files;
       for (const auto& b : entry.brackets) files += (files.empty() ? "'" : ", '") + b.file + "'";
-      ThrowBadInput("every texel of the sample is masked ({} hidden behind raised markers, {} clipped in every exposure{}{}{}): "
-                    "{}",
-                    r.masked_hidden, r.masked_clipped, files.empty() ? "" : " of the bracket (", files,
-                    files.empty() ? "" : fmt::format("; stored value >= {} of full scale{})", o_.hdr.saturation,
-                                                     sum_.response.empty() ? "" : fmt::format(" or code > {}, the response curve's last constrained code", sum_.response.max_code)),
-                    r.masked_clipped > 0 ? "add a shorter exposure" : "use a view where the sample is visible");
+      const std::string limit = fmt::format("stored value >= {} of full scale{}", o_.hdr.saturation,
+                                            sum_.response.empty() ? "" : fmt::format(" or code > {}, the response curve's last constrained code", sum_.response.max_code));
+      ThrowBadInput("every texel of the sample is masked ({} hidden behind raised markers, {} clipped{}{}{}): {}",
+                    r.masked_hidden, r.masked_clipped, files.empty() ? " (" : " in every exposure of the bracket (",
+                    files.empty() ? limit : files + "; " + limit, ")",
+                    r.masked_clipped == 0 ? "use a view where the sample is visible"
+                                          : (files.empty() ? "lower the exposure or add a bracket" : "add a shorter exposure"));
     }
     r.invalid_fraction = st.invalid_fraction;
     r.max_footprint_px = st.max_footprint_px;

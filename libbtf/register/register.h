@@ -100,8 +100,10 @@ struct RegisterSummary {
 RegisterSummary RegisterPhotos(const RegisterOptions& options, const std::filesystem::path& manifest,
                                const std::filesystem::path& output, const Reporter& reporter = {});
 
-// Detection only (btf-register detect).
+// Detection only (btf-register detect). With `charuco` (a ChArUco board of the detector's family)
+// and `charuco_corners` set, also its chessboard corners (DetectCharucoCorners).
 std::vector<TagDetection> DetectInImage(const std::filesystem::path& image, const TagDetectorOptions& options,
-                                        const ImageReadOptions& input = {});
+                                        const ImageReadOptions& input = {}, const CharucoDefinition* charuco = nullptr,
+                                        std::vector<CharucoCorner>* charuco_corners = nullptr);
 
 }  // namespace btf

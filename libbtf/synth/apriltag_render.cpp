@@ -9,6 +9,7 @@
 #include <memory>
 
 #include "libbtf/core/error.h"
+#include "libbtf/io/rig.h"
 
 namespace btf {
 namespace {
@@ -34,6 +35,12 @@ FamilyPtr OpenFamily(const std::string& name) {
 
 
 TagBitmap RenderTag(const std::string& family, int id, int border_bits) {
+  if (family.rfind("aruco:", 0) == 0) {  // OpenCV's drawMarker: no quiet ring (a ChArUco square gives it)
+    TagBitmap t;
+    t.modules = ArucoMarkerModules(family.substr(6), id, border_bits, &t.total_width);
+    t.width_at_border = t.total_width;
+    return t;
+  }
   const FamilyPtr f = OpenFamily(family);
   if (id < 0 || id >= static_cast<int>(f->ncodes))
     ThrowUsage("tag id {} is outside family {} (0..{})", id, family, f->ncodes - 1);

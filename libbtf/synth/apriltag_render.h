@@ -20,6 +20,8 @@ struct TagBitmap {
 // module grid. `border_bits` = black border width in modules (2: Kalibr AprilGrid; the detection
 // square grows by 2 modules, the data bits stay centred; not for tagStandard41h12). Throws
 // btf::Error (usage) for an unknown family, an id outside the family or a bad border.
+// "aruco:DICT_..." (a ChArUco dictionary, libbtf/io/rig.h): OpenCV's marker, total_width =
+// width_at_border (no white quiet ring).
 TagBitmap RenderTag(const std::string& family, int id, int border_bits = 1);
 
 }  // namespace btf

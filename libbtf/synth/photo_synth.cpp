@@ -63,6 +63,8 @@ double PlateHalfSize(const Board& board) {
   const TagBitmap probe = RenderTag(board.family, board.markers[0].id, board.border_bits);
   const double module = (board.markers[0].corners_mm[1] - board.markers[0].corners_mm[0]).norm() / probe.width_at_border;
   if (board.grid.valid()) e += board.grid.spacing * board.grid.tag_size_mm;
+  if (board.charuco.valid())  // the outer chessboard squares reach beyond the markers
+    e = std::max(e, 0.5 * board.charuco.square_mm * std::max(board.charuco.squares_x, board.charuco.squares_y));
   return e + 3 * module;
 }
 
@@ -74,6 +76,14 @@ bool InGridCornerSquare(const AprilGrid& g, const Vec2& p) {
   const double iu = std::floor(u), iv = std::floor(v);
   if (iu < 0 || iv < 0 || iu > g.cols || iv > g.rows) return false;
   return (u - iu) * pitch < gap && (v - iv) * pitch < gap;
+}
+
+// The ChArUco square (row-major from OpenCV's top-left square) holding plate point p, or -1 off the board.
+int CharucoSquare(const CharucoDefinition& c, const Vec2& p) {
+  const double col = std::floor((p.x() + 0.5 * c.squares_x * c.square_mm) / c.square_mm);
+  const double row = std::floor((0.5 * c.squares_y * c.square_mm - p.y()) / c.square_mm);
+  if (col < 0 || row < 0 || col >= c.squares_x || row >= c.squares_y) return -1;
+  return static_cast<int>(row) * c.squares_x + static_cast<int>(col);
 }
 
 // Separable Gaussian blur of every channel, edges clamped.
@@ -131,7 +141,23 @@ void PhotoOptions::Check() const {
   BTF_CHECK_OPTION(!(format == "exr" && transfer != "linear"), "transfer", "linear for exr (float)");
   BTF_CHECK_OPTION(jpeg_quality >= 1 && jpeg_quality <= 100, "jpeg-quality", "1..100");
   BTF_CHECK_OPTION(std::isfinite(blur_px) && blur_px >= 0 && blur_px <= 20, "blur", "0..20 px");
-  BTF_CHECK_OPTION(target == "ring" || target == "aprilgrid", "target", "ring or aprilgrid");
+  BTF_CHECK_OPTION(target == "ring" || target == "aprilgrid" || target == "charuco", "target",
+                   "ring, aprilgrid or charuco");
+  BTF_CHECK_OPTION(charuco_squares_x >= 2 && charuco_squares_y >= 2 && charuco_squares_x <= 100 &&
+                       charuco_squares_y <= 100,
+                   "charuco-squares-x/charuco-squares-y", "2..100 squares");
+  BTF_CHECK_OPTION(std::isfinite(charuco_square_mm) && charuco_square_mm >= 0, "charuco-square-mm", ">= 0 (0 = auto)");
+  BTF_CHECK_OPTION(std::isfinite(charuco_marker_mm) && charuco_marker_mm >= 0 &&
+                       (charuco_marker_mm == 0 || charuco_square_mm == 0 || charuco_marker_mm < charuco_square_mm),
+                   "charuco-marker-mm", ">= 0 (0 = auto) and below the square side");
+  if (target == "charuco") {
+    int side = 0;
+    try {
+      ArucoMarkerModules(charuco_dictionary, 0, 1, &side);
+    } catch (const Error&) {
+      BTF_CHECK_OPTION(false, "charuco-dictionary", "DICT_4X4_50 .. DICT_7X7_1000 or DICT_ARUCO_ORIGINAL");
+    }
+  }
   BTF_CHECK_OPTION(border_bits >= 0 && border_bits <= 2, "border-bits", "0 (auto), 1 or 2");
   BTF_CHECK_OPTION(grid_rows >= 1 && grid_cols >= 1 && grid_rows * grid_cols <= 587, "grid-rows/grid-cols",
                    "1.. tags, at most 587 in all (tag36h11)");
@@ -182,6 +208,22 @@ Board MakeBoard(const PhotoOptions& o, double tile_mm) {
     Board b = MakeAprilGridBoard(g, o.family, o.border_bits > 0 ? o.border_bits : 2);
     b.Check("generated AprilGrid");
     return b;
+  }
+  if (o.target == "charuco") {
+    CharucoDefinition c;
+    c.squares_x = o.charuco_squares_x;
+    c.squares_y = o.charuco_squares_y;
+    c.dictionary = o.charuco_dictionary;
+    c.square_mm = o.charuco_square_mm;
+    if (c.square_mm <= 0)
+      c.square_mm = o.focal_px > 0 ? 0.85 * std::min(o.width / double(c.squares_x), o.height / double(c.squares_y)) *
+                                         o.camera_distance_mm / o.focal_px
+                                   : 20.0;
+    c.marker_mm = o.charuco_marker_mm > 0 ? o.charuco_marker_mm : 0.75 * c.square_mm;
+    if (!(c.marker_mm < c.square_mm))
+      ThrowUsage("invalid option 'charuco-marker-mm': {} mm is not below the square side {} mm", c.marker_mm,
+                 c.square_mm);
+    return MakeCharucoBoard(c, "generated ChArUco board");
   }
   Board b;
   b.family = o.family;
@@ -265,6 +307,16 @@ Image RenderPhoto(const SvbrdfModel& model, const Board& board, const PhotoOptio
   const auto& K = cam.camera;
   const Eigen::Matrix3d Rt = cam.camera_from_plate_rotation.transpose();
   Image img(W, H, 3);
+  // ChArUco: the marker in each square (-1: a black square); white squares hold a marker.
+  std::vector<int> square_marker;
+  if (board.charuco.valid()) {
+    square_marker.assign(static_cast<std::size_t>(board.charuco.squares_x * board.charuco.squares_y), -1);
+    for (std::size_t i = 0; i < board.markers.size(); ++i) {
+      const auto& c = board.markers[i].corners_mm;
+      const int sq = CharucoSquare(board.charuco, 0.25 * (c[0] + c[1] + c[2] + c[3]));
+      if (sq >= 0) square_marker[static_cast<std::size_t>(sq)] = static_cast<int>(i);
+    }
+  }
 #pragma omp parallel
   {
     std::vector<Vec2> uvs;
@@ -297,6 +349,19 @@ Image RenderPhoto(const SvbrdfModel& model, const Board& board, const PhotoOptio
             // Marker cards first (they lie at or above the material surface).
             bool hit = false;
             const MarkerGeom* only = nullptr;  // AprilGrid: the one tag whose cell holds the point
+            if (board.charuco.valid()) {  // chessboard squares and markers, all in the plane z = 0
+              const double t = -cam.center.z() / dir.z();
+              const Vec3 X = cam.center + t * dir;
+              const int sq = CharucoSquare(board.charuco, X.head<2>());
+              if (sq >= 0) {
+                const int mi = square_marker[static_cast<std::size_t>(sq)];
+                double alb = mi < 0 ? kBlack : MarkerAlbedo(markers[static_cast<std::size_t>(mi)], X.head<2>());
+                if (alb < 0) alb = kWhite;  // the white square around the marker
+                const double L = alb / kPi * irradiance(X);
+                a[0] += L, a[1] += L, a[2] += L;
+                continue;
+              }
+            }
             if (board.grid.valid()) {  // corner squares and tags, all in the plane z = 0
               const double t = -cam.center.z() / dir.z();
               const Vec3 X = cam.center + t * dir;
@@ -521,6 +586,15 @@ PhotoSummary SynthesizePhotos(const PhotoOptions& o, const SvbrdfModel& model, c
         visible = visible && px[q].x() >= 1 && px[q].y() >= 1 && px[q].x() <= o.width - 2 && px[q].y() <= o.height - 2;
       }
       if (visible) tr.marker_corners_px[m.id] = px;
+    }
+    if (board.charuco.valid()) {
+      const std::vector<Vec2> corners = CharucoCornersMm(board.charuco);
+      for (std::size_t id = 0; id < corners.size(); ++id) {
+        Vec2 px;
+        if (cam.Project(Vec3(corners[id].x(), corners[id].y(), 0), &px) && px.x() >= 1 && px.y() >= 1 &&
+            px.x() <= o.width - 2 && px.y() <= o.height - 2)
+          tr.charuco_corners_px[static_cast<int>(id)] = px;
+      }
     }
     truth.push_back(std::move(tr));
   }

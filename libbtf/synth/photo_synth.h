@@ -31,12 +31,18 @@ struct PhotoOptions {
   double marker_height_mm = 0;    // marker plane above the material surface
   std::string family = "tag36h11";
   std::string target = "ring";    // "ring": the sample with 8 markers around it; "aprilgrid": a Kalibr
-                                  // AprilGrid (no sample; a calibration target)
+                                  // AprilGrid, "charuco": a ChArUco board (both: no sample; a calibration target)
   int border_bits = 0;            // black tag border, modules; 0 = 1 (ring) or 2 (aprilgrid, as Kalibr)
   int grid_rows = 6, grid_cols = 6;  // aprilgrid: tags
   double grid_tag_mm = 0;         // aprilgrid: tag side; 0 = the grid spans 85 % of min(width, height) at 0 deg
                                   // when focal is given, else 88 mm (Kalibr's 6 x 6 grid)
   double grid_spacing = 0.3;      // aprilgrid: gap / tag side (Kalibr tagSpacing)
+  // target "charuco": an OpenCV 4.6 ChArUco board (CharucoBoard::create's layout: an ArUco marker in
+  // every white square; no sample; a calibration target).
+  int charuco_squares_x = 9, charuco_squares_y = 7;  // chessboard squares across and down
+  double charuco_square_mm = 0;   // square side; 0 = the board spans 85 % of the image at 0 deg with focal, else 20
+  double charuco_marker_mm = 0;   // marker side; 0 = 0.75 x the square side
+  std::string charuco_dictionary = "DICT_5X5_100";  // DICT_4X4_50 .. DICT_7X7_1000 or DICT_ARUCO_ORIGINAL
   double irregularity = 0;        // PatternWarp RMS displacement, tiles (as btf-synth btf)
   std::uint64_t irregularity_seed = 7;
   // Camera.

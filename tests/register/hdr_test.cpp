@@ -7,6 +7,7 @@
 #include <cmath>
 #include <fstream>
 
+#include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
 #include "libbtf/core/error.h"
@@ -105,6 +106,54 @@ TEST(HdrMerge, ClippedThreeExposureBracketRecoversRadianceWithinOnePercentAndReg
   for (std::size_t i = 0; i < ia.size(); ++i) texel_worst = std::max(texel_worst, std::abs(ib[i] / ia[i] - 1.0));
   std::printf("registered bracket vs EXR: max relative texel difference %.4f %%\n", 100 * texel_worst);
   EXPECT_LT(texel_worst, 0.01);
+}
+
+TEST(HdrMerge, SinglePhotoClippedPixelsAreMaskedCountedAndFilled) {
+  // One 16-bit photo under a point light 50 mm away (irradiance falls off from the centre, so the
+  // clipping is a patch, not a speckle of bright yarns over every texel) exposed so that the
+  // brightest 25 % of the central region (the sample) clips; truth: the same photo as float EXR at
+  // exposure 1 (never clipped). Every texel left unmasked must match the truth to 1 % (16-bit
+  // quantization and the rectification's averaging only): without the mask the clipped texels
+  // would differ unmasked.
+  const auto base = test::TempDir();
+  const auto truth_dir = Synth(base, "--format exr --exposure 1 --light-distance 50", "truth");
+  const Image truth = ReadImage(truth_dir / "v000_l000.exr");
+  std::vector<float> central;
+  for (int y = truth.height * 3 / 10; y < truth.height * 7 / 10; ++y)
+    for (int x = truth.width * 3 / 10; x < truth.width * 7 / 10; ++x)
+      central.push_back(std::max({truth.at(x, y, 0), truth.at(x, y, 1), truth.at(x, y, 2)}));
+  std::nth_element(central.begin(), central.begin() + central.size() * 3 / 4, central.end());
+  const double exposure = 1.0 / central[central.size() * 3 / 4];
+  const auto dir = Synth(base, fmt::format("--format png16 --light-distance 50 --exposure {:.9g}", exposure), "clipped");
+  const auto run = [](const std::filesystem::path& d) {
+    const std::string cmd = test::Tool("btf-register") + " run " + (d / "manifest.json").string() +
+                            " --resolution 32 --report " + (d / "r.json").string() + " -o " + (d / "d.h5").string();
+    std::string out;
+    EXPECT_EQ(test::RunCommand(cmd, &out), 0) << cmd << out;
+    return std::make_pair(ReadDataset(d / "d.h5"), out);
+  };
+  const auto [a, out_a] = run(truth_dir);
+  const auto [b, out_b] = run(dir);
+  const json r = ReadJson(dir / "r.json")["photos"][0];
+  const int masked = r["masked_texels"]["clipped"];
+  EXPECT_GT(r["clipped_pixels"].get<int>(), 0) << r.dump();
+  EXPECT_EQ(ReadJson(truth_dir / "r.json")["photos"][0]["masked_texels"]["clipped"], 0);  // EXR: no full scale
+  EXPECT_NE(out_b.find(fmt::format("masked texels: 0 hidden behind raised markers, {} clipped (filled from the "
+                                   "nearest unmasked texel)",
+                                   masked)),
+            std::string::npos)
+      << out_b;
+  const auto ia = a.image(0, 0), ib = b.image(0, 0);
+  ASSERT_EQ(ia.size(), ib.size());
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < ia.size(); ++i) differ += std::abs(ib[i] / ia[i] - 1.0) > 0.01;
+  std::printf("single photo at %.3f x: %d clipped pixels, %d of %zu texels masked; %zu samples differ from the "
+              "truth by > 1 %%\n",
+              exposure, r["clipped_pixels"].get<int>(), masked, ia.size() / 3, differ);
+  EXPECT_GT(masked, static_cast<int>(ia.size() / 3 / 20));  // the test exercises clipping
+  EXPECT_GT(differ, 0u);                                    // clipped texels do differ from the truth
+  EXPECT_LE(differ, 3 * static_cast<std::size_t>(masked));  // and only masked (filled) texels differ
+  EXPECT_LT(masked, static_cast<int>(ia.size() / 3));
 }
 
 TEST(HdrMerge, ResponseCurveRecoveredWithinTwoPercent) {

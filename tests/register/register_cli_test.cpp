@@ -158,7 +158,7 @@ TEST(RegisterCli, TexelsHiddenByRaisedMarkersAreMaskedCountedAndFilled) {
   EXPECT_GE(hidden, 10);
   EXPECT_LE(hidden, 100);
   EXPECT_EQ(steep["clipped"], 0);
-  EXPECT_NE(out.find(fmt::format("masked texels: {} hidden behind raised markers, 0 clipped in every exposure (filled "
+  EXPECT_NE(out.find(fmt::format("masked texels: {} hidden behind raised markers, 0 clipped (filled "
                                  "from the nearest unmasked texel)",
                                  hidden)),
             std::string::npos)

@@ -79,6 +79,55 @@ TEST(RigCli, AprilGridWithTwoBitBorderInSrgbJpegIsFoundWithBoardCoordinates) {
   EXPECT_EQ(json::parse(out)["tags"].size(), 0u);
 }
 
+TEST(RigCli, CharucoCornersOfASyntheticPhotoMatchTheTruth) {
+  // 30 deg view (bonn81 view 9) of btf-synth's default ChArUco board (9 x 7 squares, DICT_5X5_100,
+  // 85 % of the image at 0 deg) by the wide-angle calibration camera (640 x 480, f = 500 px,
+  // k1 = -0.15, k2 = 0.02), 8-bit sRGB PNG, blur 0.7 px, noise 0.5 % of full scale, 3 x 3 samples
+  // per pixel. Every corner in view must be found (the whole board is in view); bound 0.12 px RMS
+  // against truth.json's charuco_corners (measured 0.091: cornerSubPix's windows stay inside the
+  // 7 px white margin around the markers, and its bias there is ~0.07 px even at 16 x 16 samples
+  // per pixel; docs/btf-register.md, "Real-rig inputs").
+  const auto dir = test::TempDir();
+  const std::string synth = test::Tool("btf-synth") +
+                            " photos --quiet --target charuco --views 9 --lights 0 --width 640 --height 480 "
+                            "--focal 500 --camera-distance 90 --k1 -0.15 --k2 0.02 --format png8 --transfer srgb "
+                            "--blur 0.7 --noise 0.005 -o " + dir.string();
+  ASSERT_EQ(test::RunCommand(synth), 0) << synth;
+  const auto truth = ReadTruth(dir / "truth.json");
+  ASSERT_EQ(truth.size(), 1u);
+  ASSERT_EQ(truth[0].charuco_corners_px.size(), 48u);  // (9 - 1) x (7 - 1) inner corners, all in view
+  const Board board = ReadBoard(dir / "board.json");
+  ASSERT_TRUE(board.charuco.valid());
+  std::string out;
+  const std::string det = test::Tool("btf-register") + " detect --json " + (dir / truth[0].file).string() +
+                          " --board " + (dir / "board.json").string();
+  ASSERT_EQ(test::RunCommand(det, &out), 0) << det << out;
+  const json j = json::parse(out);
+  int markers_found = 0;
+  const double marker_rms = CornerRms(j, truth[0], &markers_found);
+  const std::vector<Vec2> mm = CharucoCornersMm(board.charuco);
+  double ss = 0, worst = 0;
+  int found = 0;
+  for (const auto& c : j["charuco_corners"]) {
+    const int id = c["id"].get<int>();
+    const auto it = truth[0].charuco_corners_px.find(id);
+    ASSERT_NE(it, truth[0].charuco_corners_px.end()) << id;
+    const Vec2 p(c["pixel_px"][0].get<double>(), c["pixel_px"][1].get<double>());
+    ss += (p - it->second).squaredNorm();
+    worst = std::max(worst, (p - it->second).norm());
+    ++found;
+    EXPECT_NEAR(c["board_mm"][0].get<double>(), mm[static_cast<std::size_t>(id)].x(), 1e-9);
+    EXPECT_NEAR(c["board_mm"][1].get<double>(), mm[static_cast<std::size_t>(id)].y(), 1e-9);
+  }
+  const double rms = found ? std::sqrt(ss / found) : 1e9;
+  std::printf("ChArUco 30 deg, 640x480 sRGB PNG: %d of %zu markers (corner RMS %.4f px), %d of 48 chessboard "
+              "corners, RMS %.4f px, worst %.4f px\n",
+              markers_found, truth[0].marker_corners_px.size(), marker_rms, found, rms, worst);
+  EXPECT_EQ(markers_found, static_cast<int>(truth[0].marker_corners_px.size()));
+  EXPECT_EQ(found, 48);
+  EXPECT_LT(rms, 0.12);
+}
+
 TEST(RigDetect, ArucoMarkersInOurCornerOrderAndPixelConvention) {
   // A DICT_5X5_100 marker drawn by OpenCV, 10 px per module, placed at a known offset on white.
   for (int border : {1, 2}) {

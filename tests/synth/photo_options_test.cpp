@@ -25,7 +25,10 @@ TEST(PhotoOptions, NewOptionsAreCheckedByName) {
   bad([](PhotoOptions& o) { o.format = "exr", o.transfer = "srgb"; }, "transfer");
   bad([](PhotoOptions& o) { o.jpeg_quality = 0; }, "jpeg-quality");
   bad([](PhotoOptions& o) { o.blur_px = -1; }, "blur");
-  bad([](PhotoOptions& o) { o.target = "charuco"; }, "target");
+  bad([](PhotoOptions& o) { o.target = "checkerboard"; }, "target");
+  bad([](PhotoOptions& o) { o.target = "charuco", o.charuco_dictionary = "DICT_APRILTAG_36h11"; }, "charuco-dictionary");
+  bad([](PhotoOptions& o) { o.charuco_squares_x = 1; }, "charuco-squares-x");
+  bad([](PhotoOptions& o) { o.charuco_square_mm = 10, o.charuco_marker_mm = 10; }, "charuco-marker-mm");
   bad([](PhotoOptions& o) { o.border_bits = 3; }, "border-bits");
   bad([](PhotoOptions& o) { o.grid_spacing = 0; }, "grid-spacing");
   PhotoOptions ok;

@@ -23,7 +23,8 @@ const btf::Marker* OnBoard(const btf::Board* board, int id) {
 }
 
 nlohmann::json DetectionsJson(const std::string& path, const std::vector<btf::TagDetection>& dets,
-                              const btf::TagDetectorOptions& options, const btf::Board* board) {
+                              const btf::TagDetectorOptions& options, const btf::Board* board,
+                              const std::vector<btf::CharucoCorner>& charuco) {
   nlohmann::json tags = nlohmann::json::array();
   for (const auto& d : dets) {
     nlohmann::json c = nlohmann::json::array();
@@ -51,6 +52,12 @@ nlohmann::json DetectionsJson(const std::string& path, const std::vector<btf::Ta
                       {"tags", tags}};
   if (options.border_bits != 1) j["border_bits"] = options.border_bits;
   if (board) j["board_frame"] = "plate mm: x right, y up, z = marker height above the material surface";
+  if (board && board->charuco.valid()) {
+    nlohmann::json cs = nlohmann::json::array();
+    for (const auto& c : charuco)
+      cs.push_back({{"id", c.id}, {"pixel_px", {c.pixel.x(), c.pixel.y()}}, {"board_mm", {c.board_mm.x(), c.board_mm.y(), 0.0}}});
+    j["charuco_corners"] = cs;
+  }
   return j;
 }
 
@@ -93,10 +100,14 @@ int RunDetect(const CLI::App& app, const btf::cli::CommonFlags& common, DetectFl
     board = btf::ReadBoard(f.board);
     if (!f.family_given) options.family = board->family, options.border_bits = board->border_bits;
   }
-  const auto dets = btf::DetectInImage(f.image, options, f.input);
+  // A ChArUco board detected with its own family: its chessboard corners too.
+  const bool charuco = board && board->charuco.valid() && options.family == board->family;
+  std::vector<btf::CharucoCorner> corners;
+  const auto dets =
+      btf::DetectInImage(f.image, options, f.input, charuco ? &board->charuco : nullptr, charuco ? &corners : nullptr);
   const btf::Board* b = board ? &*board : nullptr;
   if (common.json) {
-    btf::cli::PrintJson(app, DetectionsJson(f.image, dets, options, b));
+    btf::cli::PrintJson(app, DetectionsJson(f.image, dets, options, b, corners));
     return 0;
   }
   fmt::print("{}: {} {} tag(s); corners px (OpenCV centers), order LB RB RT LT{}\n", f.image, dets.size(),
@@ -115,6 +126,12 @@ int RunDetect(const CLI::App& app, const btf::cli::CommonFlags& common, DetectFl
                  m->corners_mm[3].y(), m->height_mm);
     else
       fmt::print("            not on the board\n");
+  }
+  if (charuco) {
+    fmt::print("{} ChArUco chessboard corner(s): id, px (OpenCV centers), board mm (x, y, z)\n", corners.size());
+    for (const auto& c : corners)
+      fmt::print("  corner {:4d}  ({:.3f}, {:.3f})  ({:.3f}, {:.3f}, 0.000)\n", c.id, c.pixel.x(), c.pixel.y(),
+                 c.board_mm.x(), c.board_mm.y());
   }
   return 0;
 }
@@ -241,6 +258,8 @@ int main(int argc, char** argv) {
   auto* kfam = ck->add_option("--family", ko.detector.family, "Tag family (default: the board's)");
   auto* kbb = ck->add_option("--border-bits", ko.detector.border_bits, "Black tag border, modules (default: the board's)");
   ck->add_option("--min-markers", ko.min_markers, "Photos with fewer board markers are left out");
+  ck->add_option("--min-corners", ko.min_corners, "Photos with fewer corners (marker or ChArUco) are left out");
+  ck->add_flag("--charuco-corners", ko.charuco_corners, "ChArUco board: calibrate on its chessboard corners, not its markers'");
   ck->add_option("--min-views", ko.min_views, "Fewer usable photos is an error");
   ck->add_option("--outlier-factor", ko.outlier_factor, "Photos with RMS over this x the median are named outliers");
   add_input_flags(ck, ko.input, kf.input_gamma);

@@ -192,7 +192,7 @@ int main(int argc, char** argv) {
   cp->add_option("--transfer", po.transfer, "Integer encoding: linear | srgb (the sRGB curve, tagged in the file)");
   cp->add_option("--jpeg-quality", po.jpeg_quality, "JPEG quality 1..100 (with --format jpeg)");
   cp->add_option("--blur", po.blur_px, "Gaussian optical blur (PSF) sigma, px (0 = none)");
-  cp->add_option("--target", po.target, "ring (sample with 8 markers) | aprilgrid (Kalibr AprilGrid, no sample)");
+  cp->add_option("--target", po.target, "ring (sample with 8 markers) | aprilgrid (Kalibr AprilGrid) | charuco (ChArUco board); the last two: no sample");
   cp->add_option("--family", po.family, "Tag family of the markers");
   cp->add_option("--border-bits", po.border_bits, "Black tag border, modules (0 = 1 for ring, 2 for aprilgrid)");
   cp->add_option("--grid-rows", po.grid_rows, "AprilGrid: tag rows");
@@ -200,6 +200,13 @@ int main(int argc, char** argv) {
   cp->add_option("--grid-tag-mm", po.grid_tag_mm,
                  "AprilGrid: tag side, mm (0 = grid spans 85% of the image at 0 deg with --focal, else 88)");
   cp->add_option("--grid-spacing", po.grid_spacing, "AprilGrid: gap between tags / tag side");
+  cp->add_option("--charuco-squares-x", po.charuco_squares_x, "ChArUco: chessboard squares across");
+  cp->add_option("--charuco-squares-y", po.charuco_squares_y, "ChArUco: chessboard squares down");
+  cp->add_option("--charuco-square-mm", po.charuco_square_mm,
+                 "ChArUco: square side, mm (0 = board spans 85% of the image at 0 deg with --focal, else 20)");
+  cp->add_option("--charuco-marker-mm", po.charuco_marker_mm, "ChArUco: marker side, mm (0 = 0.75 x the square)");
+  cp->add_option("--charuco-dictionary", po.charuco_dictionary,
+                 "ChArUco: ArUco dictionary, DICT_4X4_50 .. DICT_7X7_1000 or DICT_ARUCO_ORIGINAL");
   cp->add_option("--exposure", po.exposure, "Pixel value = exposure x radiance (0 = auto)");
   cp->add_option("--brackets", po.brackets,
                  "Exposure bracket: factors on the exposure, comma-separated (e.g. 0.25,1,4); one photo each, "
