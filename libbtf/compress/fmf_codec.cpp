@@ -199,7 +199,7 @@ FmfModel FactoriseFmf(const FmfSvdOptions& options, const SlotSource& input, con
   for (auto& zm : z)
     for (Eigen::Index i = 0; i < zm.size(); ++i) zm.data()[i] = normal(rng);
   std::vector<double> energy(std::size_t(M), 0.0);
-  std::vector<MatrixXd> block, term(std::size_t(M));
+  std::vector<MatrixXd> block, term(static_cast<std::size_t>(M));
   const int passes = 2 + 2 * options.power_iterations;
   int pass = 0;
   auto progress = [&] { reporter.Progress(std::size_t(++pass), std::size_t(passes), "factorising"); };
