@@ -1,15 +1,17 @@
 #!/bin/bash
 # Distributed scaling benchmark (docs/scaling.md, "Measured scaling"): wall time and peak memory
-# per rank of btf-synth btf, btf-compress --method pca-view and lpca, and btf-eval compare on a
-# bonn81 BTF, for 1, 2 and 4 local MPI ranks. Slow (minutes); not part of `./run test`.
+# per rank of btf-synth btf, btf-compress --method pca-view, lpca, fmf and dfmf, and btf-eval
+# compare on a bonn81 BTF, for 1, 2 and 4 local MPI ranks. Slow (minutes); not part of `./run test`.
 #
 #   bench/scaling.sh [BUILD_DIR] [OUT_DIR]
 #
 # Environment: RESOLUTION (default 128), RANKS (default "1 2 4"), SYNTH_VIEWS (views rendered by
 # the timed btf-synth runs, default 0-80: all; the full-size input used by the other commands is
 # rendered once, with the largest rank count), OMP_NUM_THREADS (default 1 per rank),
-# LPCA_FLAGS (default "--clusters 8 --components 8"), PCA_FLAGS (default "--components 8"), GT (an
-# existing full-size input to compress and compare instead of the rendered one).
+# LPCA_FLAGS (default "--clusters 8 --components 8"), PCA_FLAGS (default "--components 8"),
+# FMF_FLAGS (fmf and dfmf, default "--components 16"), GT (an existing full-size input to
+# compress and compare instead of the rendered one), COMMANDS (default
+# "synth pca-view lpca fmf dfmf compare"; compare measures the lpca codec, so it needs lpca).
 # Prints one line per (command, ranks) with each rank's seconds and peak RSS (from --json's
 # per_rank), and writes them to OUT_DIR/scaling.tsv.
 set -euo pipefail
@@ -21,6 +23,9 @@ ranks_list=${RANKS:-"1 2 4"}
 synth_views=${SYNTH_VIEWS:-0-80}
 lpca_flags=${LPCA_FLAGS:-"--clusters 8 --components 8"}
 pca_flags=${PCA_FLAGS:-"--components 8"}
+fmf_flags=${FMF_FLAGS:-"--components 16"}
+commands=" ${COMMANDS:-synth pca-view lpca fmf dfmf compare} "
+want() { [[ $commands == *" $1 "* ]]; }
 export OMP_NUM_THREADS=${OMP_NUM_THREADS:-1}
 mkdir -p "$out"
 root=""
@@ -58,6 +63,7 @@ echo "load before: $(uptime)"
 gt=${GT:-$out/gt.h5}
 synth=(btf --preset twill --directions bonn81 --resolution "$res" --samples 1)
 for r in $ranks_list; do
+  want synth || break
   run synth "$r" "$bin/btf-synth" "${synth[@]}" --views "$synth_views" -o "$out/synth-$r.h5"
   if [ -z "${GT:-}" ] && [ "$synth_views" = 0-80 ] && [ "$r" = "$max_ranks" ]; then mv "$out/synth-$r.h5" "$gt"; fi
   rm -f "$out/synth-$r.h5"
@@ -65,10 +71,14 @@ done
 [ -f "$gt" ] || mpi "$max_ranks" "$bin/btf-synth" "${synth[@]}" --quiet -o "$gt" >/dev/null
 for r in $ranks_list; do
   # shellcheck disable=SC2086
-  run pca-view "$r" "$bin/btf-compress" "$gt" --method pca-view $pca_flags -o "$out/pca-$r.h5"
+  want pca-view && run pca-view "$r" "$bin/btf-compress" "$gt" --method pca-view $pca_flags -o "$out/pca-$r.h5"
   # shellcheck disable=SC2086
-  run lpca "$r" "$bin/btf-compress" "$gt" --method lpca $lpca_flags -o "$out/lpca-$r.h5"
-  run compare "$r" "$bin/btf-eval" compare "$gt" "$out/lpca-$r.h5"
+  want lpca && run lpca "$r" "$bin/btf-compress" "$gt" --method lpca $lpca_flags -o "$out/lpca-$r.h5"
+  for m in fmf dfmf; do
+    # shellcheck disable=SC2086
+    want $m && run $m "$r" "$bin/btf-compress" "$gt" --method $m $fmf_flags -o "$out/$m-$r.h5"
+  done
+  want compare && run compare "$r" "$bin/btf-eval" compare "$gt" "$out/lpca-$r.h5"
 done
 echo "load after: $(uptime)"
 echo "figures: $tsv"

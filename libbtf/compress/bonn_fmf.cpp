@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "libbtf/core/atomic_file.h"
+#include "libbtf/core/distributed.h"
 #include "libbtf/core/error.h"
 #include "libbtf/io/bonn.h"
 
@@ -49,6 +50,15 @@ ConvertSummary WriteFactors(const FmfModel& model, const FmfFileShape& shape, bo
     Put<std::uint8_t>(head, 1);  // header version 1
     Put<std::uint32_t>(head, log_reduction ? 1 : 0);
   }
+  ConvertSummary s;
+  s.output = path.string();
+  s.output_format = dfmf ? "dfmf" : "fmf";
+  s.views = shape.views.size();
+  s.lights = shape.lights.size();
+  s.height = shape.height;
+  s.width = shape.width;
+  s.channels = model.channels;
+  if (dist::Rank() != 0) return s;  // distributed: every rank holds the factors, rank 0 writes them
   AtomicOutput out(path);
   out.Reserve();
   {
@@ -77,14 +87,6 @@ ConvertSummary WriteFactors(const FmfModel& model, const FmfFileShape& shape, bo
     if (!file) ThrowIo("cannot write '{}': disk full or no permission?", path.string());
   }
   out.Commit();
-  ConvertSummary s;
-  s.output = path.string();
-  s.output_format = dfmf ? "dfmf" : "fmf";
-  s.views = shape.views.size();
-  s.lights = shape.lights.size();
-  s.height = shape.height;
-  s.width = shape.width;
-  s.channels = model.channels;
   std::error_code ec;
   s.bytes_written = std::filesystem::file_size(path, ec);
   return s;

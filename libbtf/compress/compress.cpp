@@ -115,6 +115,39 @@ void FillErrors(const ErrorStats& e, CompressSummary& s) {
   s.psnr_db = e.PsnrDb(e.max_abs_reference).value_or(std::numeric_limits<double>::infinity());
 }
 
+// Errors of a codec in the original domain (lpca, lpca-tensor, fmf, dfmf): decode slot by slot
+// against the input, one image per task, merged in (view, light) order. Distributed, each rank
+// decodes and reads the view slots it owns (round robin) and every rank merges every image's
+// sums in the same order.
+ErrorStats MeasureErrors(const SlotSource& in, const Codec& codec) {
+  const int V = in.views().size(), L = in.lights().size();
+  const std::size_t image = in.image_size();
+  std::vector<ErrorStats> per_image(std::size_t(V) * L);
+  std::vector<float> ref(in.slot_size()), dec(in.slot_size());
+  for (int v = 0; v < V; ++v) {
+    if (!dist::Owns(v)) continue;
+    in.ReadViewSlot(v, ref.data());
+    codec.DecodeViewSlot(v, dec.data());
+#pragma omp parallel for schedule(static)
+    for (int l = 0; l < L; ++l)
+      per_image[std::size_t(v) * L + l].Add(ref.data() + l * image, dec.data() + l * image, image);
+  }
+  if (dist::Distributed()) {
+    std::vector<ErrorStats> mine;
+    for (int v = dist::Rank(); v < V; v += dist::Size())
+      mine.insert(mine.end(), per_image.begin() + std::ptrdiff_t(v) * L, per_image.begin() + std::ptrdiff_t(v + 1) * L);
+    const std::vector<ErrorStats> all = dist::AllGatherConcat(mine);
+    std::size_t at = 0;
+    for (int r = 0; r < dist::Size(); ++r)
+      for (int v = r; v < V; v += dist::Size())
+        for (int l = 0; l < L; ++l) per_image[std::size_t(v) * L + l] = all[at++];
+    BTF_CHECK(at == all.size());
+  }
+  ErrorStats err;
+  for (const auto& e : per_image) err.Merge(e);
+  return err;
+}
+
 PcaRequest MakeRequest(const CompressOptions& o, std::uint64_t seed_offset) {
   PcaRequest q;
   q.max_components = o.components;
@@ -331,38 +364,6 @@ class LpcaCompressor {
   // Of the transformed input: sum of squares, and the squared residual of the kept fit.
   double total_energy() const { return total_; }
   double residual_energy() const { return residual_energy_; }
-
-  // Errors in the original domain: decode slot by slot against the input, one image per task,
-  // merged in (view, light) order. Distributed, each rank decodes and reads the view slots it
-  // owns (round robin) and every rank merges every image's sums in the same order.
-  static ErrorStats MeasureErrors(const SlotSource& in, const Codec& codec) {
-    const int V = in.views().size(), L = in.lights().size();
-    const std::size_t image = in.image_size();
-    std::vector<ErrorStats> per_image(std::size_t(V) * L);
-    std::vector<float> ref(in.slot_size()), dec(in.slot_size());
-    for (int v = 0; v < V; ++v) {
-      if (!dist::Owns(v)) continue;
-      in.ReadViewSlot(v, ref.data());
-      codec.DecodeViewSlot(v, dec.data());
-#pragma omp parallel for schedule(static)
-      for (int l = 0; l < L; ++l)
-        per_image[std::size_t(v) * L + l].Add(ref.data() + l * image, dec.data() + l * image, image);
-    }
-    if (dist::Distributed()) {
-      std::vector<ErrorStats> mine;
-      for (int v = dist::Rank(); v < V; v += dist::Size())
-        mine.insert(mine.end(), per_image.begin() + std::ptrdiff_t(v) * L, per_image.begin() + std::ptrdiff_t(v + 1) * L);
-      const std::vector<ErrorStats> all = dist::AllGatherConcat(mine);
-      std::size_t at = 0;
-      for (int r = 0; r < dist::Size(); ++r)
-        for (int v = r; v < V; v += dist::Size())
-          for (int l = 0; l < L; ++l) per_image[std::size_t(v) * L + l] = all[at++];
-      BTF_CHECK(at == all.size());
-    }
-    ErrorStats err;
-    for (const auto& e : per_image) err.Merge(e);
-    return err;
-  }
 
  private:
   static constexpr std::size_t kRows = 256;      // texels per GEMM block (assignment, reassignment)
@@ -933,7 +934,7 @@ void CompressLpcaTensor(const SlotSource& in, const CompressOptions& o, const Tr
                                         residual, q, m);
     sum.times.Add("factorise", t.Seconds());
     t.Restart();
-    e = LpcaCompressor::MeasureErrors(in, codec);
+    e = MeasureErrors(in, codec);
     sum.times.Add("evaluate", t.Seconds());
     const double measured = e.RelativeL2().value_or(0.0);
     rep.Info("lpca-tensor: {} terms, predicted relative error {:.6g}, measured {:.6g}", m.terms(), sum.predicted_error,
@@ -1053,14 +1054,18 @@ CompressSummary Compress(const CompressOptions& options, const SlotSource& input
   sum.height = in.height();
   sum.width = in.width();
   sum.channels = in.channels();
-  if (o.method == CodecMethod::kPcaView)
+  if (o.method == CodecMethod::kPcaView) {
     CompressPcaView(in, o, tr, codec, sum, rep);
-  else if (o.method == CodecMethod::kLpcaTensor)
+  } else if (o.method == CodecMethod::kLpcaTensor) {
     CompressLpcaTensor(in, o, tr, codec, sum, rep);
-  else if (IsFullMatrixFactorisation(o.method))
-    FillErrors(CompressFmf(in, o, [&](int v, float* x, std::size_t n) { tr.Apply(in, v, x, n); }, codec, sum, rep), sum);
-  else
+  } else if (IsFullMatrixFactorisation(o.method)) {
+    CompressFmf(in, o, [&](int v, float* x, std::size_t n) { tr.Apply(in, v, x, n); }, codec, sum, rep);
+    Timer t;
+    FillErrors(MeasureErrors(in, codec), sum);
+    sum.times.Add("evaluate", t.Seconds());
+  } else {
     LpcaCompressor(in, o, tr, sum, rep).Run(codec);
+  }
   sum.components = 0;
   for (int c : sum.slot_components) sum.components = std::max(sum.components, c);
   sum.codec_bytes = codec.StoredBytes();

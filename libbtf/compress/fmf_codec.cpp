@@ -9,6 +9,7 @@
 #include <Eigen/Dense>
 
 #include "libbtf/compress/codec.h"
+#include "libbtf/core/distributed.h"
 #include "libbtf/core/error.h"
 #include "libbtf/core/timer.h"
 #include "libbtf/io/hdf5.h"
@@ -36,6 +37,9 @@ const Eigen::Matrix3d& YuvToRgb() {
 
 // Components carrying at most this fraction of a matrix's energy are dropped.
 constexpr double kNullEnergyFraction = 1e-12;
+
+// MPI tag of the per-view X^T q terms that ranks send to rank 0.
+constexpr int kTermTag = 16;
 
 // The matrices being factorised: FMF one (rows c + C(l + L v)), DFMF one per YUV channel
 // (rows l + L v); columns are texels. View v contributes `rows_per_view` contiguous rows.
@@ -178,38 +182,86 @@ FmfModel FactoriseFmf(const FmfSvdOptions& options, const SlotSource& input, con
   const Eigen::Index full = std::min(D, T);
   const Eigen::Index k = std::min<Eigen::Index>(options.components, full);
   const Eigen::Index r = std::min<Eigen::Index>(k + options.oversampling, full);
-  CheckAllocation(8.0 * M * double(r) * double(D + T) + 8.0 * double(R) * double(T) * M,
-                  fmt::format("'{}': factorisation", input.name()));
+  // z and q, one view block, and one view's X^T q term (received by rank 0 in a distributed run).
+  CheckAllocation(8.0 * M * double(r) * double(D + 2 * T) + 8.0 * double(R) * double(T) * M,
+                  dist::Distributed() ? fmt::format("'{}': factorisation (on this rank)", input.name())
+                                      : fmt::format("'{}': factorisation", input.name()));
   // Randomised range finder (Halko et al. 2011) streamed over view slots: Y = X Omega, then
   // power iterations Y = X (X^T Q), then B = Q^T X and the SVD of the small B.
+  // Distributed (docs/scaling.md): rank r reads and multiplies only the view slots it owns
+  // (round robin). A view's rows of X z depend on that view alone and are shared by every rank;
+  // X^T q is a sum of one term per view, which rank 0 adds in view order as one process does and
+  // broadcasts. Every other step is computed by every rank from the same values, so the factors
+  // are bit-identical for any number of ranks.
   std::mt19937_64 rng(options.seed);
   std::normal_distribution<double> normal(0.0, 1.0);
   std::vector<MatrixXd> z(std::size_t(M), MatrixXd(T, r)), q(std::size_t(M), MatrixXd(D, r));
   for (auto& zm : z)
     for (Eigen::Index i = 0; i < zm.size(); ++i) zm.data()[i] = normal(rng);
   std::vector<double> energy(std::size_t(M), 0.0);
-  std::vector<MatrixXd> block;
+  std::vector<MatrixXd> block, term(static_cast<std::size_t>(M));
   const int passes = 2 + 2 * options.power_iterations;
   int pass = 0;
   auto progress = [&] { reporter.Progress(std::size_t(++pass), std::size_t(passes), "factorising"); };
   auto range = [&](bool first) {  // q = orth(X z)
+    std::vector<double> view_energy(std::size_t(M) * nv, 0.0);  // [m * nv + v]
     for (int v = 0; v < nv; ++v) {
+      if (!dist::Owns(v)) continue;
       x.Read(v, block);
       for (int m = 0; m < M; ++m) {
         q[std::size_t(m)].middleRows(R * v, R) = block[std::size_t(m)] * z[std::size_t(m)];
-        if (first) energy[std::size_t(m)] += block[std::size_t(m)].squaredNorm();
+        if (first) view_energy[std::size_t(m) * nv + v] = block[std::size_t(m)].squaredNorm();
       }
     }
+    if (dist::Distributed()) {  // every rank gets every view's rows (and energies)
+      std::vector<double> mine;
+      for (int v = dist::Rank(); v < nv; v += dist::Size())
+        for (int m = 0; m < M; ++m) {
+          const MatrixXd rows = q[std::size_t(m)].middleRows(R * v, R);
+          mine.insert(mine.end(), rows.data(), rows.data() + rows.size());
+          mine.push_back(view_energy[std::size_t(m) * nv + v]);
+        }
+      const std::vector<double> all = dist::AllGatherConcat(mine);
+      std::size_t at = 0;
+      for (int rank = 0; rank < dist::Size(); ++rank)
+        for (int v = rank; v < nv; v += dist::Size())
+          for (int m = 0; m < M; ++m) {
+            q[std::size_t(m)].middleRows(R * v, R) = Eigen::Map<const MatrixXd>(all.data() + at, R, r);
+            at += std::size_t(R * r);
+            view_energy[std::size_t(m) * nv + v] = all[at++];
+          }
+      BTF_CHECK(at == all.size());
+    }
+    if (first)  // summed in view order
+      for (int m = 0; m < M; ++m)
+        for (int v = 0; v < nv; ++v) energy[std::size_t(m)] += view_energy[std::size_t(m) * nv + v];
     for (auto& qm : q) qm = Orthonormal(qm);
     progress();
   };
-  auto project = [&] {  // z = X^T q
+  auto project = [&] {  // z = X^T q = sum over views v of X_v^T q_v, added in view order
     for (auto& zm : z) zm.setZero();
+    const std::size_t bytes = sizeof(double) * std::size_t(T) * std::size_t(r);
     for (int v = 0; v < nv; ++v) {
-      x.Read(v, block);
-      for (int m = 0; m < M; ++m)
-        z[std::size_t(m)].noalias() += block[std::size_t(m)].transpose() * q[std::size_t(m)].middleRows(R * v, R);
+      const int owner = dist::Owner(v);
+      if (dist::Rank() == owner) {
+        x.Read(v, block);
+        for (int m = 0; m < M; ++m)
+          term[std::size_t(m)].noalias() = block[std::size_t(m)].transpose() * q[std::size_t(m)].middleRows(R * v, R);
+        if (owner != 0) {  // rank 0 receives the views in order; messages from one rank keep their order
+          for (const auto& tm : term) dist::Send(0, kTermTag, tm.data(), bytes);
+          continue;
+        }
+      } else if (dist::Rank() == 0) {
+        for (auto& tm : term) {
+          tm.resize(T, r);
+          dist::Recv(owner, kTermTag, tm.data(), bytes);
+        }
+      } else {
+        continue;
+      }
+      for (int m = 0; m < M; ++m) z[std::size_t(m)] += term[std::size_t(m)];
     }
+    for (auto& zm : z) dist::Broadcast(0, zm.data(), bytes);
     progress();
   };
   range(true);
@@ -246,8 +298,8 @@ FmfModel FactoriseFmf(const FmfSvdOptions& options, const SlotSource& input, con
   return model;
 }
 
-ErrorStats CompressFmf(const SlotSource& in, const CompressOptions& o, const SlotTransform& transform, Codec& codec,
-                       CompressSummary& sum, const Reporter& rep) {
+void CompressFmf(const SlotSource& in, const CompressOptions& o, const SlotTransform& transform, Codec& codec,
+                 CompressSummary& sum, const Reporter& rep) {
   FmfSvdOptions so;
   so.decorrelate = o.method == CodecMethod::kDfmf;
   so.components = o.components;
@@ -259,7 +311,7 @@ ErrorStats CompressFmf(const SlotSource& in, const CompressOptions& o, const Slo
   if (o.components > rank) {
     sum.warnings.push_back(fmt::format("components {} clamped to {} (the rank bound min(directions{}, texels))",
                                        o.components, rank, so.decorrelate ? "" : " x channels"));
-    rep.Warn("{}", sum.warnings.back());
+    if (dist::Rank() == 0) rep.Warn("{}", sum.warnings.back());  // the same on every rank: reported once
   }
   Timer t;
   int dropped = 0;
@@ -271,18 +323,6 @@ ErrorStats CompressFmf(const SlotSource& in, const CompressOptions& o, const Slo
     sum.warnings.push_back(fmt::format("{} components with ~0 singular value dropped (rank-deficient data)", dropped));
     rep.Info("{}", sum.warnings.back());
   }
-  // Errors in the original domain, view slot by view slot in order.
-  t.Restart();
-  ErrorStats err;
-  std::vector<float> ref(in.slot_size()), dec(in.slot_size());
-  for (int v = 0; v < in.views().size(); ++v) {
-    rep.Progress(std::size_t(v), std::size_t(in.views().size()), "evaluate");
-    in.ReadViewSlot(v, ref.data());
-    codec.DecodeViewSlot(v, dec.data());
-    err.Add(ref.data(), dec.data(), ref.size());
-  }
-  sum.times.Add("evaluate", t.Seconds());
-  return err;
 }
 
 void WriteFmfModel(const h5::File& f, const FmfModel& model, int views, int height, int width) {

@@ -4,7 +4,8 @@
 // (views x lights x channels) x texels matrix (FMF), or one per decorrelated YUV channel of the
 // (views x lights) x texels matrices (DFMF). The SVD is randomised (Halko et al. 2011) and
 // streams the input one view slot at a time, so memory is one view slot plus the factors. The
-// same factors are what compress/bonn_fmf.h writes as Bonn `.btf` files.
+// same factors are what compress/bonn_fmf.h writes as Bonn `.btf` files. Under MPI the view slots
+// are split over the ranks (docs/scaling.md).
 #include <cstdint>
 #include <functional>
 #include <string>
@@ -70,14 +71,16 @@ using SlotTransform = std::function<void(int view, float* slot, std::size_t n)>;
 // Factorises `input` (read 2 + 2 power_iterations times, one view slot at a time). Components
 // carrying at most 1e-12 of a matrix's energy are dropped (counted in *dropped). NaN/Inf in the
 // input: btf::Error (bad input) naming the item; DFMF of other than 3 channels: btf::Error (usage).
+// Distributed (a collective: every rank calls it; docs/scaling.md): each rank reads only the view
+// slots it owns (round robin), and every rank returns the same model, bit-identical to one process's.
 FmfModel FactoriseFmf(const FmfSvdOptions& options, const SlotSource& input, const SlotTransform& transform = {},
                       const Reporter& reporter = {}, int* dropped = nullptr);
 
 // btf-compress --method fmf|dfmf: fills the codec's model, the summary's per-matrix components,
-// warnings and phase times (factorise, evaluate) and returns the errors of the decoded codec
-// against `input` in the original domain (one more pass over the input).
-ErrorStats CompressFmf(const SlotSource& input, const CompressOptions& options, const SlotTransform& transform,
-                       Codec& codec, CompressSummary& summary, const Reporter& reporter);
+// warnings and factorise time (Compress then measures the decoded codec's errors, as for the
+// other methods). Distributed as FactoriseFmf.
+void CompressFmf(const SlotSource& input, const CompressOptions& options, const SlotTransform& transform,
+                 Codec& codec, CompressSummary& summary, const Reporter& reporter);
 
 // The model's items in a codec file (docs/format.md, "Codec file": /codec/fmf/...). The reader
 // refuses wrong shapes, non-finite values and component counts above the rank (bad input).

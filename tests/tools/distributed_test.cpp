@@ -106,6 +106,13 @@ void ExpectSameCodec(const Codec& a, const Codec& b, const std::string& what) {
   EXPECT_TRUE(x.cluster_of == y.cluster_of) << what;
   EXPECT_TRUE(x.cluster_components == y.cluster_components) << what;
   EXPECT_TRUE(x.means == y.means && x.basis == y.basis && x.weights == y.weights) << what;
+  const FmfModel &f = a.fmf(), &g = b.fmf();
+  ASSERT_EQ(f.matrices.size(), g.matrices.size()) << what;
+  for (std::size_t m = 0; m < f.matrices.size(); ++m) {
+    const FmfMatrix &p = f.matrices[m], &q = g.matrices[m];
+    EXPECT_EQ(p.components, q.components) << what << " matrix " << m;
+    EXPECT_TRUE(p.singular_values == q.singular_values && p.u == q.u && p.sxv == q.sxv) << what << " matrix " << m;
+  }
 }
 
 // Compresses `input` with `flags` in one process and with 1-4 ranks: every codec array and
@@ -154,6 +161,82 @@ TEST(Distributed, LpcaCodecIsTheSameForOneToFourRanks) {
                                                        "--quiet -o " + in),
             0);
   ExpectCompressionIndependentOfRanks(in, " --method lpca --clusters 6 --components 3 --seed 3", dir);
+}
+
+// btf-compress --method fmf: the randomised SVD's passes are split over view slots (13 over 1-4
+// ranks: uneven shares); rank 0 adds the per-view X^T Q terms in view order, so the factors and
+// every error figure are bit-identical. 24 x 24 texels and 13 x 7 x 3 rows: a full-rank block
+// on every rank, and the --log transform applied by the rank that reads the slot.
+TEST(Distributed, FmfCodecIsTheSameForOneToFourRanks) {
+  REQUIRE_MPI();
+  const fs::path dir = test::TempDir();
+  const std::string in = (dir / "in.h5").string();
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-synth") + " btf --views 0-12 --lights 0-6 --resolution 24 --samples 1 "
+                                                       "--quiet -o " + in),
+            0);
+  ExpectCompressionIndependentOfRanks(in, " --method fmf --components 6 --seed 5", dir);
+  const fs::path log_dir = dir / "log";
+  fs::create_directories(log_dir);
+  ExpectCompressionIndependentOfRanks(in, " --method fmf --components 4 --log --error 0.05", log_dir);
+}
+
+// btf-compress --method dfmf: the three YUV matrices, each factorised as fmf's one.
+TEST(Distributed, DfmfCodecIsTheSameForOneToFourRanks) {
+  REQUIRE_MPI();
+  const fs::path dir = test::TempDir();
+  const std::string in = (dir / "in.h5").string();
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-synth") + " btf --views 0-12 --lights 0-6 --resolution 24 --samples 1 "
+                                                       "--quiet -o " + in),
+            0);
+  ExpectCompressionIndependentOfRanks(in, " --method dfmf --components 5 --seed 2", dir);
+}
+
+// btf-convert --to fmf | dfmf factorises with the same distributed SVD; rank 0 writes the Bonn
+// file, whose bytes (no time stamps) are the same for 1-4 ranks as for one process.
+TEST(Distributed, ConvertToFmfAndDfmfWritesTheSameFileForOneToFourRanks) {
+  REQUIRE_MPI();
+  const fs::path dir = test::TempDir();
+  const std::string in = (dir / "in.h5").string();
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-synth") + kSynth + " --quiet -o " + in), 0);
+  for (const std::string to : {"fmf", "dfmf"}) {
+    const fs::path serial = dir / (to + "-serial.btf");
+    const std::string flags = " --to " + to + " --components 4 --quiet -o ";
+    ASSERT_EQ(test::RunCommand(test::Tool("btf-convert") + " " + in + flags + serial.string()), 0);
+    const std::string want = test::Slurp(serial);
+    ASSERT_GT(want.size(), 100u);
+    for (int ranks = 1; ranks <= 4; ++ranks) {
+      const fs::path out = dir / fmt::format("{}-ranks{}.btf", to, ranks);
+      ASSERT_EQ(test::RunCommand(Mpirun(ranks) + test::Tool("btf-convert") + " " + in + flags + out.string()), 0)
+          << to << " with " << ranks << " ranks";
+      EXPECT_TRUE(test::Slurp(out) == want) << to << " with " << ranks << " ranks";
+    }
+  }
+  std::vector<std::string> left;
+  for (const auto& e : fs::directory_iterator(dir))
+    if (e.path().filename().string().find(".tmp-") != std::string::npos) left.push_back(e.path().string());
+  EXPECT_TRUE(left.empty()) << "temporary left behind: " << left.front();
+}
+
+// fmf: the rank that owns a view slot holding Inf reports it (exit 3, its rank and the file
+// named) and no codec appears.
+TEST(Distributed, FmfRankThatReadsADamagedSlotEndsTheJob) {
+  REQUIRE_MPI();
+  const fs::path dir = test::TempDir();
+  const std::string a = (dir / "a.h5").string(), b = (dir / "b.h5").string(), codec = (dir / "c.h5").string();
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-synth") + kSynth + " --quiet -o " + a), 0);
+  {
+    Dataset d = ReadDataset(a);
+    d.view_slot(5)[7] = std::numeric_limits<float>::infinity();  // owned by rank 1 of 2
+    WriteDataset(b, d);
+  }
+  std::string out;
+  const int rc = test::RunCommand(Mpirun(2) + test::Tool("btf-compress") + " " + b + " --method fmf --quiet -o " +
+                                      codec + " 2>&1",
+                                  &out);
+  EXPECT_EQ(rc, 3) << out;
+  EXPECT_NE(out.find("rank 1 of 2"), std::string::npos) << out;
+  EXPECT_NE(out.find(b), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(codec));
 }
 
 // The same with a random k-means sample (8192 of 96 x 96 texels, gathered on rank 0) and the
@@ -219,23 +302,29 @@ TEST(Distributed, PcaViewRankThatReadsADamagedSlotEndsTheJob) {
   EXPECT_FALSE(fs::exists(codec));
 }
 
-// fmf / dfmf (one global SVD) and decode / export do not split their work: refused on 2 ranks.
+// lpca-tensor (its factorisation runs on one process), decode, and btf-convert's conversions
+// other than the factorisation to fmf / dfmf do not split their work: refused on 2 ranks.
 TEST(Distributed, CompressCommandsThatDoNotSplitRefuseSeveralRanks) {
   REQUIRE_MPI();
   const fs::path dir = test::TempDir();
   const std::string in = (dir / "in.h5").string(), codec = (dir / "c.h5").string();
   ASSERT_EQ(test::RunCommand(test::Tool("btf-synth") + kSynth + " --quiet -o " + in), 0);
   ASSERT_EQ(test::RunCommand(test::Tool("btf-compress") + " " + in + " --method pca-view --quiet -o " + codec), 0);
-  for (const auto& [args, name] : std::vector<std::pair<std::string, std::string>>{
-           {in + " --method fmf -o " + (dir / "f.h5").string(), "btf-compress --method fmf"},
-           {"decode " + codec + " -o " + (dir / "d.h5").string(), "btf-compress decode"}}) {
+  struct Refused {
+    std::string tool, args, name;
+  };
+  for (const Refused& c : std::vector<Refused>{
+           {"btf-compress", in + " --method lpca-tensor -o " + (dir / "f.h5").string(), "btf-compress --method lpca-tensor"},
+           {"btf-compress", "decode " + codec + " -o " + (dir / "d.h5").string(), "btf-compress decode"},
+           {"btf-convert", in + " --to bdi -o " + (dir / "b.btf").string(), "btf-convert --to bdi"}}) {
     std::string out;
-    const int rc = test::RunCommand(Mpirun(2) + test::Tool("btf-compress") + " " + args + " 2>&1", &out);
+    const int rc = test::RunCommand(Mpirun(2) + test::Tool(c.tool) + " " + c.args + " 2>&1", &out);
     EXPECT_EQ(rc, 2) << out;
-    EXPECT_NE(out.find("'" + name + "' does not run distributed"), std::string::npos) << out;
+    EXPECT_NE(out.find("'" + c.name + "' does not run distributed"), std::string::npos) << out;
   }
   EXPECT_FALSE(fs::exists(dir / "f.h5"));
   EXPECT_FALSE(fs::exists(dir / "d.h5"));
+  EXPECT_FALSE(fs::exists(dir / "b.btf"));
 }
 
 // A rank that fails on its part (view slot 1 of the test file holds a NaN, which compare refuses

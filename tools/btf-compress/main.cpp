@@ -35,9 +35,8 @@ int RunCompress(const CLI::App& app, const btf::cli::CommonFlags& common, Compre
   f.options.method = btf::ParseMethod(f.method);
   f.options.storage = btf::ParseStorage(f.storage);
   if (!f.scene.empty()) f.options.scene = btf::SceneSpec::Load(f.scene);
-  // pca-view and lpca split their work over MPI ranks (docs/scaling.md); rank 0 alone writes.
-  if (btf::IsFullMatrixFactorisation(f.options.method) || f.options.method == btf::CodecMethod::kLpcaTensor)
-    btf::cli::RequireSingleRank("btf-compress --method " + f.method);
+  // pca-view, lpca, fmf and dfmf split their work over MPI ranks (docs/scaling.md); rank 0 alone writes.
+  if (f.options.method == btf::CodecMethod::kLpcaTensor) btf::cli::RequireSingleRank("btf-compress --method " + f.method);
   // Claim the output before the work: an unwritable folder fails now, not after the compression.
   std::optional<btf::AtomicOutput> target;
   if (btf::cli::PrintingRank()) {
@@ -142,7 +141,7 @@ int main(int argc, char** argv) {
                  "Largest atlas side in texels (schneider: 3D texture width, height and depth, WebGL2 guarantees 256; "
                  "sattler: texture-array layer width and height, WebGL2 guarantees 2048)");
   ce->add_option("-o,--output", ef.output, "Output folder")->required();
-  btf::cli::MarkDistributed(&app);  // compressing with pca-view or lpca; decode and export refuse
+  btf::cli::MarkDistributed(&app);  // compressing (not lpca-tensor); decode and export refuse
 
   return btf::cli::Main(argc, argv, app, [&] {
     if (cd->parsed()) return RunDecode(app, common, df);

@@ -20,7 +20,10 @@ struct ConvertFlags {
 int RunConvert(const CLI::App& app, const btf::cli::CommonFlags& common, const ConvertFlags& f) {
   // Options and the output format are checked before the input is read.
   const std::string target = btf::ConvertTarget(f.options, f.output);
+  // Only the factorisation to FMF / DFMF splits its work over MPI ranks (docs/scaling.md); every
+  // other conversion refuses more than one rank.
   if (!f.options.layout.empty()) {
+    btf::cli::RequireSingleRank("btf-convert --layout");
     btf::cli::PrintSummary(app, common,
                            btf::ImportImageSet(f.options, f.input, f.output, btf::cli::MakeReporter(common)));
     return 0;
@@ -33,14 +36,17 @@ int RunConvert(const CLI::App& app, const btf::cli::CommonFlags& common, const C
       // An fmf / dfmf codec already holds the factors: written as they are.
       const btf::Codec codec = btf::ReadCodec(f.input);
       if (btf::MethodName(codec.method()) == target) {
+        btf::cli::RequireSingleRank("btf-convert --to " + target + " of an " + target + " codec");
         btf::cli::PrintSummary(app, common, btf::WriteFmf(codec, f.input, f.output, btf::cli::MakeReporter(common)));
         return 0;
       }
     }
+    // Distributed: each rank reads and multiplies its view slots, rank 0 writes the file.
     const auto input = btf::OpenSource(f.input);
     btf::cli::PrintSummary(app, common, btf::WriteFmf(o, *input, f.output, btf::cli::MakeReporter(common)));
     return 0;
   }
+  btf::cli::RequireSingleRank("btf-convert --to " + target);
   if (target == "pvf") {
     // PVF stores a per-view PCA: written from a pca-view codec's factors, not re-factorised.
     const btf::Codec codec = btf::ReadCodec(f.input);
@@ -84,5 +90,6 @@ int main(int argc, char** argv) {
   app.add_option("--power-iterations", f.fmf.power_iterations, "FMF/DFMF output: power iterations of the randomised SVD");
   app.add_option("--seed", f.fmf.seed, "FMF/DFMF output: seed of the randomised SVD");
   btf::cli::AddCommonFlags(app, common);
+  btf::cli::MarkDistributed(&app);  // --to fmf | dfmf (factorised); the other conversions refuse
   return btf::cli::Main(argc, argv, app, [&] { return RunConvert(app, common, f); });
 }
