@@ -46,6 +46,13 @@ nlohmann::json RunJson(const std::string& cmd, int* rc = nullptr) {
 
 const std::string kSynth = " btf --views 0-12 --lights 0-6 --resolution 8 --samples 2";
 
+// Renders `btf-synth` with these flags into dir/in.h5 and returns its path.
+std::string SynthInput(const fs::path& dir, const std::string& flags) {
+  const std::string in = (dir / "in.h5").string();
+  EXPECT_EQ(test::RunCommand(test::Tool("btf-synth") + flags + " --quiet -o " + in), 0) << flags;
+  return in;
+}
+
 // btf-synth btf: ranks render disjoint view slots and rank 0 writes; 13 views over 1-4 ranks
 // give uneven shares. The stored values must be bit-identical, since a slot does not depend on
 // the rank that renders it; the JSON reports the ranks and each rank's time and memory.
@@ -145,8 +152,7 @@ void ExpectCompressionIndependentOfRanks(const std::string& input, const std::st
 TEST(Distributed, PcaViewCodecIsTheSameForOneToFourRanks) {
   REQUIRE_MPI();
   const fs::path dir = test::TempDir();
-  const std::string in = (dir / "in.h5").string();
-  ASSERT_EQ(test::RunCommand(test::Tool("btf-synth") + kSynth + " --quiet -o " + in), 0);
+  const std::string in = SynthInput(dir, kSynth);
   ExpectCompressionIndependentOfRanks(in, " --method pca-view --components 3", dir);
 }
 
@@ -156,10 +162,7 @@ TEST(Distributed, PcaViewCodecIsTheSameForOneToFourRanks) {
 TEST(Distributed, LpcaCodecIsTheSameForOneToFourRanks) {
   REQUIRE_MPI();
   const fs::path dir = test::TempDir();
-  const std::string in = (dir / "in.h5").string();
-  ASSERT_EQ(test::RunCommand(test::Tool("btf-synth") + " btf --views 0-5 --lights 0-5 --resolution 48 --samples 1 "
-                                                       "--quiet -o " + in),
-            0);
+  const std::string in = SynthInput(dir, " btf --views 0-5 --lights 0-5 --resolution 48 --samples 1");
   ExpectCompressionIndependentOfRanks(in, " --method lpca --clusters 6 --components 3 --seed 3", dir);
 }
 
@@ -170,10 +173,7 @@ TEST(Distributed, LpcaCodecIsTheSameForOneToFourRanks) {
 TEST(Distributed, FmfCodecIsTheSameForOneToFourRanks) {
   REQUIRE_MPI();
   const fs::path dir = test::TempDir();
-  const std::string in = (dir / "in.h5").string();
-  ASSERT_EQ(test::RunCommand(test::Tool("btf-synth") + " btf --views 0-12 --lights 0-6 --resolution 24 --samples 1 "
-                                                       "--quiet -o " + in),
-            0);
+  const std::string in = SynthInput(dir, " btf --views 0-12 --lights 0-6 --resolution 24 --samples 1");
   ExpectCompressionIndependentOfRanks(in, " --method fmf --components 6 --seed 5", dir);
   const fs::path log_dir = dir / "log";
   fs::create_directories(log_dir);
@@ -184,10 +184,7 @@ TEST(Distributed, FmfCodecIsTheSameForOneToFourRanks) {
 TEST(Distributed, DfmfCodecIsTheSameForOneToFourRanks) {
   REQUIRE_MPI();
   const fs::path dir = test::TempDir();
-  const std::string in = (dir / "in.h5").string();
-  ASSERT_EQ(test::RunCommand(test::Tool("btf-synth") + " btf --views 0-12 --lights 0-6 --resolution 24 --samples 1 "
-                                                       "--quiet -o " + in),
-            0);
+  const std::string in = SynthInput(dir, " btf --views 0-12 --lights 0-6 --resolution 24 --samples 1");
   ExpectCompressionIndependentOfRanks(in, " --method dfmf --components 5 --seed 2", dir);
 }
 
@@ -196,8 +193,7 @@ TEST(Distributed, DfmfCodecIsTheSameForOneToFourRanks) {
 TEST(Distributed, ConvertToFmfAndDfmfWritesTheSameFileForOneToFourRanks) {
   REQUIRE_MPI();
   const fs::path dir = test::TempDir();
-  const std::string in = (dir / "in.h5").string();
-  ASSERT_EQ(test::RunCommand(test::Tool("btf-synth") + kSynth + " --quiet -o " + in), 0);
+  const std::string in = SynthInput(dir, kSynth);
   for (const std::string to : {"fmf", "dfmf"}) {
     const fs::path serial = dir / (to + "-serial.btf");
     const std::string flags = " --to " + to + " --components 4 --quiet -o ";
@@ -244,10 +240,7 @@ TEST(Distributed, FmfRankThatReadsADamagedSlotEndsTheJob) {
 TEST(Distributed, LpcaWithASampledSeedingIsTheSameForOneToFourRanks) {
   REQUIRE_MPI();
   const fs::path dir = test::TempDir();
-  const std::string in = (dir / "in.h5").string();
-  ASSERT_EQ(test::RunCommand(test::Tool("btf-synth") + " btf --views 0-3 --lights 0-3 --resolution 96 --samples 1 "
-                                                       "--quiet -o " + in),
-            0);
+  const std::string in = SynthInput(dir, " btf --views 0-3 --lights 0-3 --resolution 96 --samples 1");
   ExpectCompressionIndependentOfRanks(in, " --method lpca --clusters 5 --components 2 --log --max-iterations 4", dir);
 }
 
@@ -257,10 +250,7 @@ TEST(Distributed, LpcaWithASampledSeedingIsTheSameForOneToFourRanks) {
 TEST(Distributed, LpcaOverOneRanksMemoryLimitSucceedsWithFourRanks) {
   REQUIRE_MPI();
   const fs::path dir = test::TempDir();
-  const std::string in = (dir / "in.h5").string();
-  ASSERT_EQ(test::RunCommand(test::Tool("btf-synth") + " btf --views 0-2 --lights 0-2 --resolution 128 --samples 1 "
-                                                       "--quiet -o " + in),
-            0);
+  const std::string in = SynthInput(dir, " btf --views 0-2 --lights 0-2 --resolution 128 --samples 1");
   const double matrix = 4.0 * 128 * 128 * 3 * 3 * 3;  // texels x (views x lights x channels) floats
   const std::string limit = fmt::format("BTF_MAX_BYTES={} ", std::uint64_t(0.6 * matrix));
   const std::string flags = " --method lpca --clusters 4 --components 2 --max-iterations 3 --quiet";
