@@ -53,6 +53,26 @@ std::string SynthInput(const fs::path& dir, const std::string& flags) {
   return in;
 }
 
+// The rank that owns view slot `view` (rank 1 of 2) finds an Inf in it: the job ends with exit 3
+// naming that rank and the file, and no codec appears.
+void ExpectDamagedSlotEndsTheJob(const std::string& method, int view) {
+  const fs::path dir = test::TempDir();
+  const std::string a = (dir / "a.h5").string(), b = (dir / "b.h5").string(), codec = (dir / "c.h5").string();
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-synth") + kSynth + " --quiet -o " + a), 0);
+  {
+    Dataset d = ReadDataset(a);
+    d.view_slot(view)[5] = std::numeric_limits<float>::infinity();
+    WriteDataset(b, d);
+  }
+  std::string out;
+  const int rc = test::RunCommand(
+      Mpirun(2) + test::Tool("btf-compress") + " " + b + " --method " + method + " --quiet -o " + codec + " 2>&1", &out);
+  EXPECT_EQ(rc, 3) << method << ": " << out;
+  EXPECT_NE(out.find("rank 1 of 2"), std::string::npos) << out;
+  EXPECT_NE(out.find(b), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(codec)) << method;
+}
+
 // btf-synth btf: ranks render disjoint view slots and rank 0 writes; 13 views over 1-4 ranks
 // give uneven shares. The stored values must be bit-identical, since a slot does not depend on
 // the rank that renders it; the JSON reports the ranks and each rank's time and memory.
@@ -137,8 +157,9 @@ void ExpectCompressionIndependentOfRanks(const std::string& input, const std::st
     for (const char* key : {"rmse", "relative_error", "max_abs_error", "psnr_db", "codec_bytes", "components",
                             "slot_components", "cluster_components", "iteration_relative_errors",
                             "iteration_reassigned_texels", "warnings"})
-      if (want.contains(key))  // compared as text: doubles printed with every digit
+      if (want.contains(key)) {  // compared as text: doubles printed with every digit
         EXPECT_EQ(got.value(key, nlohmann::json()).dump(), want[key].dump()) << key << " with " << ranks << " ranks";
+      }
     ExpectSameCodec(ref, ReadCodec(out), fmt::format("{} ranks", ranks));
     std::vector<std::string> left;
     for (const auto& e : fs::directory_iterator(dir))
@@ -216,23 +237,7 @@ TEST(Distributed, ConvertToFmfAndDfmfWritesTheSameFileForOneToFourRanks) {
 // fmf: the rank that owns a view slot holding Inf reports it (exit 3, its rank and the file
 // named) and no codec appears.
 TEST(Distributed, FmfRankThatReadsADamagedSlotEndsTheJob) {
-  REQUIRE_MPI();
-  const fs::path dir = test::TempDir();
-  const std::string a = (dir / "a.h5").string(), b = (dir / "b.h5").string(), codec = (dir / "c.h5").string();
-  ASSERT_EQ(test::RunCommand(test::Tool("btf-synth") + kSynth + " --quiet -o " + a), 0);
-  {
-    Dataset d = ReadDataset(a);
-    d.view_slot(5)[7] = std::numeric_limits<float>::infinity();  // owned by rank 1 of 2
-    WriteDataset(b, d);
-  }
-  std::string out;
-  const int rc = test::RunCommand(Mpirun(2) + test::Tool("btf-compress") + " " + b + " --method fmf --quiet -o " +
-                                      codec + " 2>&1",
-                                  &out);
-  EXPECT_EQ(rc, 3) << out;
-  EXPECT_NE(out.find("rank 1 of 2"), std::string::npos) << out;
-  EXPECT_NE(out.find(b), std::string::npos) << out;
-  EXPECT_FALSE(fs::exists(codec));
+  ExpectDamagedSlotEndsTheJob("fmf", 5);
 }
 
 // The same with a random k-means sample (8192 of 96 x 96 texels, gathered on rank 0) and the
@@ -273,23 +278,7 @@ TEST(Distributed, LpcaOverOneRanksMemoryLimitSucceedsWithFourRanks) {
 // pca-view: the rank that owns the damaged view slot reports it (exit 3, its rank and the
 // file named) and no codec appears.
 TEST(Distributed, PcaViewRankThatReadsADamagedSlotEndsTheJob) {
-  REQUIRE_MPI();
-  const fs::path dir = test::TempDir();
-  const std::string a = (dir / "a.h5").string(), b = (dir / "b.h5").string(), codec = (dir / "c.h5").string();
-  ASSERT_EQ(test::RunCommand(test::Tool("btf-synth") + kSynth + " --quiet -o " + a), 0);
-  {
-    Dataset d = ReadDataset(a);
-    d.view_slot(3)[5] = std::numeric_limits<float>::infinity();  // owned by rank 1 of 2
-    WriteDataset(b, d);
-  }
-  std::string out;
-  const int rc = test::RunCommand(Mpirun(2) + test::Tool("btf-compress") + " " + b + " --method pca-view --quiet -o " +
-                                      codec + " 2>&1",
-                                  &out);
-  EXPECT_EQ(rc, 3) << out;
-  EXPECT_NE(out.find("rank 1 of 2"), std::string::npos) << out;
-  EXPECT_NE(out.find(b), std::string::npos) << out;
-  EXPECT_FALSE(fs::exists(codec));
+  ExpectDamagedSlotEndsTheJob("pca-view", 3);
 }
 
 // lpca-tensor (its factorisation runs on one process), decode, and btf-convert's conversions
