@@ -237,6 +237,7 @@ TEST(Distributed, ConvertToFmfAndDfmfWritesTheSameFileForOneToFourRanks) {
 // fmf: the rank that owns a view slot holding Inf reports it (exit 3, its rank and the file
 // named) and no codec appears.
 TEST(Distributed, FmfRankThatReadsADamagedSlotEndsTheJob) {
+  REQUIRE_MPI();
   ExpectDamagedSlotEndsTheJob("fmf", 5);
 }
 
@@ -278,6 +279,7 @@ TEST(Distributed, LpcaOverOneRanksMemoryLimitSucceedsWithFourRanks) {
 // pca-view: the rank that owns the damaged view slot reports it (exit 3, its rank and the
 // file named) and no codec appears.
 TEST(Distributed, PcaViewRankThatReadsADamagedSlotEndsTheJob) {
+  REQUIRE_MPI();
   ExpectDamagedSlotEndsTheJob("pca-view", 3);
 }
 
