@@ -94,6 +94,8 @@ void CompressOptions::Check() const {
   BTF_CHECK_OPTION(log_epsilon > 0 && std::isfinite(log_epsilon), "log_epsilon", "must be > 0");
   BTF_CHECK_OPTION(max_iterations >= 0 && max_iterations <= 1000, "max_iterations", "must be 0..1000");
   BTF_CHECK_OPTION(min_improvement >= 0 && min_improvement < 1, "min_improvement", "must be in [0, 1)");
+  BTF_CHECK_OPTION(lpca_memory == "auto" || lpca_memory == "in-core" || lpca_memory == "out-of-core", "lpca_memory",
+                   "must be auto, in-core or out-of-core");
   BTF_CHECK_OPTION(gram_limit >= 1, "gram_limit", "must be >= 1");
   BTF_CHECK_OPTION(storage == CodecStorage::kFloat || !IsFullMatrixFactorisation(method), "storage",
                    "half storage is for pca-view and lpca codecs (fmf/dfmf factors are stored as float)");
@@ -104,7 +106,7 @@ nlohmann::json CompressOptions::ToJson() const {
           {"clusters", clusters},           {"target_error", target_error},
           {"retained_energy", retained_energy}, {"seed", seed},
           {"log_transform", log_transform}, {"log_epsilon", log_epsilon},
-          {"max_iterations", max_iterations}, {"min_improvement", min_improvement},
+          {"max_iterations", max_iterations}, {"min_improvement", min_improvement}, {"lpca_memory", lpca_memory},
           {"gram_limit", gram_limit},       {"storage", StorageName(storage)},
           {"max_bytes", max_bytes},         {"quant_bits", quant_bits},
           {"tensor_growth", tensor_growth}};
@@ -124,6 +126,7 @@ nlohmann::json CompressSummary::ToJson() const {
     j["clusters"] = clusters;
     j["iteration_relative_errors"] = iteration_errors;
     j["iteration_reassigned_texels"] = iteration_changes;
+    j["lpca_memory"] = {{"mode", lpca_memory}, {"input_passes", lpca_passes}, {"peak_rss_bytes", peak_rss_bytes}};
   }
   if (method == "lpca-tensor")
     j["tensor"] = {{"terms", tensor_terms},
@@ -176,6 +179,9 @@ std::string CompressSummary::Report() const {
   r += fmt::format("  PSNR                  {:.2f} dB (peak = {} = {:.6g})\n", psnr_db, psnr_peak_definition, psnr_peak);
   if (method == "lpca" || method == "lpca-tensor")
     r += fmt::format("  iteration errors      {:.5f}\n", fmt::join(iteration_errors, " "));
+  if (!lpca_memory.empty())
+    r += fmt::format("  lpca memory           {}, {} passes over the input, peak memory {}\n", lpca_memory, lpca_passes,
+                     FormatBytes(peak_rss_bytes));
   if (scene_used)
     r += fmt::format("  scene                 kept {}/{} views, {}/{} lights; full codec {} -> saved {}; error on used "
                      "directions {:.6g}\n",

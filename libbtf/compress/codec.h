@@ -52,6 +52,9 @@ enum class CodecStorage { kFloat, kHalf };
 std::string StorageName(CodecStorage storage);
 // Throws btf::Error (usage) for unknown names.
 CodecStorage ParseStorage(const std::string& name);
+// LPCA's memory limit: min(MaxAllocationBytes() (BTF_MAX_BYTES), MemAvailable of /proc/meminfo
+// where readable). --lpca-memory auto goes out of core above it; out of core uses half of it.
+std::uint64_t LpcaMemoryLimit();
 
 struct CompressOptions {
   CodecMethod method = CodecMethod::kPcaView;
@@ -85,6 +88,10 @@ struct CompressOptions {
   bool log_transform = false;
   double log_epsilon = 1e-3;  // epsilon of the log transform, in data units (1/sr)
   int max_iterations = 20;    // LPCA: PCA/reassignment rounds at most
+  // LPCA memory mode: "auto" (out-of-core when the texel-major matrix, 4 N V L C bytes, exceeds
+  // LpcaMemoryLimit()), "in-core" (hold the matrix; refused above BTF_MAX_BYTES) or "out-of-core"
+  // (stream the view slots, docs/btf-compress.md "Out-of-core LPCA"). Same codec either way.
+  std::string lpca_memory = "auto";
   // LPCA stops when an iteration improves the relative error by less than this fraction.
   double min_improvement = 1e-3;
   // Decomposition choice: Gram matrix of the smaller side (double) when min(n, d) <= this,
@@ -107,6 +114,9 @@ struct CompressSummary {
   int clusters = 0;                    // lpca
   std::vector<double> iteration_errors;  // lpca: relative error after each PCA/reassignment round
   std::vector<int> iteration_changes;    // lpca: texels that changed cluster in each round
+  std::string lpca_memory;               // lpca: "in-core" or "out-of-core" (the mode used)
+  int lpca_passes = 0;                   // lpca: passes over the input's view slots
+  std::uint64_t peak_rss_bytes = 0;      // lpca: the process's peak resident memory after compressing
   // lpca-tensor: rank-1 terms kept, quantisation bits, the LPCA stage's relative error and the
   // predicted error of the factorised codec (transformed domain, before quantisation of weights).
   int tensor_terms = 0, quant_bits = 0;

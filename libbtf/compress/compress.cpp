@@ -2,6 +2,7 @@
 // reassignment in texel blocks).
 #include <algorithm>
 #include <cmath>
+#include <fstream>
 #include <future>
 #include <limits>
 #include <numeric>
@@ -17,6 +18,17 @@
 #include "libbtf/io/slot_source.h"
 
 namespace btf {
+
+std::uint64_t LpcaMemoryLimit() {
+  std::uint64_t limit = MaxAllocationBytes();
+  std::ifstream meminfo("/proc/meminfo");
+  std::string key;
+  std::uint64_t kib = 0;
+  while (meminfo >> key >> kib)
+    if (key == "MemAvailable:") return std::min(limit, kib * 1024);
+    else meminfo.ignore(std::numeric_limits<std::streamsize>::max(), '\n');
+  return limit;
+}
 
 namespace {
 
@@ -339,12 +351,25 @@ class LpcaCompressor {
       : in_(in), o_(o), tr_(tr), sum_(sum), rep_(rep),
         N_(std::size_t(in.height()) * in.width()),
         d_(std::size_t(in.views().size()) * in.lights().size() * in.channels()),
-        R_(dist::Size()), rank_(dist::Rank()), t0_(TexelBegin(rank_)), t1_(TexelBegin(rank_ + 1)) {}
+        R_(dist::Size()), rank_(dist::Rank()), t0_(TexelBegin(rank_)), t1_(TexelBegin(rank_ + 1)) {
+    const double matrix = 4.0 * double(N_) * double(d_), limit = double(LpcaMemoryLimit());
+    ooc_ = o_.lpca_memory == "out-of-core" || (o_.lpca_memory == "auto" && R_ == 1 && matrix > limit);
+    if (ooc_ && R_ > 1) ThrowUsage("--lpca-memory out-of-core runs on one rank (ranks split the texel matrix instead)");
+    budget_ = limit / 2;  // out of core: the texel chunk, or one wave of clusters' rows
+    chunk_ = std::max<std::size_t>(kRows, std::size_t(budget_ / (4.0 * double(d_))) / kRows * kRows);
+    sum_.lpca_memory = ooc_ ? "out-of-core" : "in-core";
+  }
 
   // measure = false: no error pass (lpca-tensor measures its own codec).
   void Run(Codec& codec, bool measure = true) {
     Timer t;
-    ReadTexelMajor();
+    if (ooc_) {
+      std::vector<double> all(N_);
+      ForChunks([&] { std::copy(chunk_norms_.begin(), chunk_norms_.end(), all.begin() + std::ptrdiff_t(t0_)); });
+      SetNorms(all);
+    } else {
+      ReadTexelMajor();
+    }
     sum_.times.Add("read", t.Seconds());
     t.Restart();
     ClusterFit fit = InitialClustering();
@@ -355,10 +380,13 @@ class LpcaCompressor {
     A_.resize(0, 0);  // the evaluation decodes the codec; the texel matrix is no longer needed
     StoreModel(fit, codec);
     residual_energy_ = fit.error * fit.error * total_;
+    sum_.peak_rss_bytes = dist::PeakResidentBytes();
     if (!measure) return;
     t.Restart();
     FillErrors(MeasureErrors(in_, codec), sum_);
+    ++sum_.lpca_passes;
     sum_.times.Add("evaluate", t.Seconds());
+    sum_.peak_rss_bytes = dist::PeakResidentBytes();
   }
 
   // Of the transformed input: sum of squares, and the squared residual of the kept fit.
@@ -382,15 +410,9 @@ class LpcaCompressor {
     if (rank_ == 0) rep_.Warn("{}", w);  // the same on every rank: reported once
   }
 
-  // Texel-major matrix A (this rank's texels x d, row = one texel's ABRDF), transformed; texel
-  // norms (of every texel, on every rank).
-  void ReadTexelMajor() {
+  // One pass over the view slots: rows[i] (d floats) gets texel texels[i]'s transformed ABRDF.
+  void ReadRows(const std::vector<std::size_t>& texels, const std::vector<float*>& rows) const {
     const int V = in_.views().size(), L = in_.lights().size(), C = in_.channels();
-    CheckAllocation(4.0 * double(local()) * double(d_),
-                    R_ > 1 ? fmt::format("texel-major copy of '{}' for LPCA (texels {}-{} of {} on this rank)", in_.name(),
-                                         t0_, t1_, N_)
-                           : fmt::format("texel-major copy of '{}' for LPCA", in_.name()));
-    A_.resize(static_cast<Eigen::Index>(local()), static_cast<Eigen::Index>(d_));
     std::vector<float> slot(in_.slot_size());
     for (int v = 0; v < V; ++v) {
       rep_.Progress(std::size_t(v), std::size_t(V), "read");
@@ -398,18 +420,56 @@ class LpcaCompressor {
       CheckFiniteSlot(in_, v, slot.data());
       tr_.Apply(in_, v, slot.data(), slot.size());
 #pragma omp parallel for schedule(static)
-      for (std::ptrdiff_t ti = 0; ti < static_cast<std::ptrdiff_t>(local()); ++ti)
+      for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(texels.size()); ++i)
         for (int l = 0; l < L; ++l)
           for (int c = 0; c < C; ++c)
-            A_(ti, (std::ptrdiff_t(v) * L + l) * C + c) = slot[(std::size_t(l) * N_ + t0_ + std::size_t(ti)) * C + c];
+            rows[std::size_t(i)][(std::size_t(v) * L + l) * C + c] = slot[(std::size_t(l) * N_ + texels[std::size_t(i)]) * C + c];
     }
-    std::vector<double> mine(local());
-    for (Eigen::Index i = 0; i < A_.rows(); ++i) mine[std::size_t(i)] = A_.row(i).cast<double>().squaredNorm();
-    const std::vector<double> all = R_ > 1 ? dist::AllGatherConcat(mine) : mine;
+    ++sum_.lpca_passes;
+  }
+
+  // A = the rows of texels [t0_, t1_) (one pass); chunk_norms_ their squared norms.
+  void LoadRows() {
+    A_.resize(static_cast<Eigen::Index>(local()), static_cast<Eigen::Index>(d_));
+    std::vector<std::size_t> texels(local());
+    std::vector<float*> rows(local());
+    for (std::size_t i = 0; i < local(); ++i) texels[i] = t0_ + i, rows[i] = A_.row(Eigen::Index(i)).data();
+    ReadRows(texels, rows);
+    chunk_norms_.resize(local());
+    for (Eigen::Index i = 0; i < A_.rows(); ++i) chunk_norms_[std::size_t(i)] = A_.row(i).cast<double>().squaredNorm();
+  }
+
+  // Runs f() with A_ holding the rows of texels [t0_, t1_): in core once (A_ holds this rank's
+  // texels); out of core once per chunk of chunk_ texels (whole kRows blocks, so every GEMM block
+  // has the in-core rows), one pass over the slots each.
+  template <typename F>
+  void ForChunks(F&& f) {
+    if (!ooc_) return f();
+    for (std::size_t first = 0; first < N_; first += chunk_) {
+      t0_ = first, t1_ = std::min(N_, first + chunk_);
+      LoadRows();
+      f();
+    }
+    A_.resize(0, 0);
+    t0_ = 0, t1_ = N_;
+  }
+
+  void SetNorms(const std::vector<double>& all) {
     BTF_CHECK(all.size() == N_);
     norms_ = Eigen::Map<const Eigen::VectorXd>(all.data(), static_cast<Eigen::Index>(N_));
     total_ = norms_.sum();
     residual_.assign(N_, 0.0);
+  }
+
+  // Texel-major matrix A (this rank's texels x d, row = one texel's ABRDF), transformed; texel
+  // norms (of every texel, on every rank).
+  void ReadTexelMajor() {
+    CheckAllocation(4.0 * double(local()) * double(d_),
+                    R_ > 1 ? fmt::format("texel-major copy of '{}' for LPCA (texels {}-{} of {} on this rank)", in_.name(),
+                                         t0_, t1_, N_)
+                           : fmt::format("texel-major copy of '{}' for LPCA (--lpca-memory out-of-core streams it)", in_.name()));
+    LoadRows();
+    SetNorms(R_ > 1 ? dist::AllGatherConcat(chunk_norms_) : chunk_norms_);
   }
 
   // Runs f(first, count) over [0, m) in static blocks of kRows (the last one shorter), each
@@ -467,6 +527,16 @@ class LpcaCompressor {
     return sample;
   }
 
+  // Out of core: the rows of the sample texels, in sample order (one pass).
+  RowMatrixXf ReadSampleRows(const std::vector<std::size_t>& sample) const {
+    CheckAllocation(4.0 * double(sample.size()) * double(d_), fmt::format("k-means sample of '{}'", in_.name()));
+    RowMatrixXf S(static_cast<Eigen::Index>(sample.size()), static_cast<Eigen::Index>(d_));
+    std::vector<float*> rows(sample.size());
+    for (std::size_t i = 0; i < sample.size(); ++i) rows[i] = S.row(Eigen::Index(i)).data();
+    ReadRows(sample, rows);
+    return S;
+  }
+
   // The rows of the sample texels, in sample order, on rank 0 (the sample is sorted and the
   // ranks' ranges contiguous: each rank's sample rows are one run of the sample).
   RowMatrixXf GatherSampleRows(const std::vector<std::size_t>& sample) const {
@@ -507,10 +577,10 @@ class LpcaCompressor {
     const std::size_t S = sample.size();
     RowMatrixXf centers(K_, static_cast<Eigen::Index>(d_));
     int rounds = 0;
-    if (R_ == 1) {
+    if (R_ == 1 && !ooc_) {
       rounds = Lloyd(A_, norms_.data(), sample, rng, centers);
-    } else {
-      const RowMatrixXf rows = GatherSampleRows(sample);
+    } else {  // the sample's rows gathered (by rank 0, or in one pass out of core): the same Lloyd
+      const RowMatrixXf rows = ooc_ ? ReadSampleRows(sample) : GatherSampleRows(sample);
       if (rank_ == 0) {
         std::vector<std::size_t> index(S);
         std::iota(index.begin(), index.end(), std::size_t(0));
@@ -522,8 +592,8 @@ class LpcaCompressor {
       dist::Broadcast(0, &rounds, sizeof rounds);
     }
     ClusterFit fit;
-    std::vector<std::int32_t> mine(local());
-    NearestCenters(A_, nullptr, centers, nullptr, local(), mine.data(), nullptr);
+    std::vector<std::int32_t> mine(ooc_ ? N_ : local());
+    ForChunks([&] { NearestCenters(A_, nullptr, centers, nullptr, local(), mine.data() + (ooc_ ? t0_ : 0), nullptr); });
     fit.assign = R_ > 1 ? dist::AllGatherConcat(mine) : std::move(mine);
     BTF_CHECK(fit.assign.size() == N_);
     FitClusters(fit, false);
@@ -707,8 +777,30 @@ class LpcaCompressor {
     if (R_ > 1) wave = std::size_t(std::max(1, omp_get_max_threads()));
     std::size_t waves = 0;
     for (const auto& list : owned) waves = std::max(waves, wave ? (list.size() + wave - 1) / wave : 0);
+    // Out of core: waves of consecutive clusters (largest first) whose rows fit budget_, each
+    // gathered in one pass over the slots. wave_end[w]: one past wave w's last index in the list.
+    std::vector<std::size_t> wave_end;
+    for (std::size_t w = 0; w < waves; ++w) wave_end.push_back(std::min(owned[std::size_t(rank_)].size(), (w + 1) * wave));
+    if (ooc_) {
+      wave_end.clear();
+      double bytes = 0;
+      const auto& list = owned[0];
+      for (std::size_t j = 0; j < list.size(); ++j) {
+        const double b = 4.0 * double(members[std::size_t(list[j])].size()) * double(d_);
+        if (b > budget_)
+          ThrowBadInput("out-of-core LPCA: cluster {} has {} texels ({:.3g} GiB of rows), over the wave budget of {:.3g} "
+                        "GiB (half the memory limit {:.3g} GiB); use more clusters (-k) or raise BTF_MAX_BYTES",
+                        list[j], members[std::size_t(list[j])].size(), b / double(1ull << 30),
+                        budget_ / double(1ull << 30), 2 * budget_ / double(1ull << 30));
+        if (j > 0 && bytes + b > budget_) wave_end.push_back(j), bytes = 0;
+        bytes += b;
+      }
+      if (!list.empty()) wave_end.push_back(list.size());
+      waves = wave_end.size();
+    }
     std::vector<RowMatrixXf> X(static_cast<std::size_t>(K_));
     for (std::size_t w = 0; w < waves; ++w) {
+      if (ooc_) ReadClusterRows(members, owned[0], w ? wave_end[w - 1] : 0, wave_end[w], X);
       for (int o = 0; o < R_ && R_ > 1; ++o) {
         const auto& list = owned[static_cast<std::size_t>(o)];
         for (std::size_t j = w * wave; j < std::min(list.size(), (w + 1) * wave); ++j) {
@@ -737,7 +829,7 @@ class LpcaCompressor {
       // region) and the residuals are summed in cluster order: the result does not depend on
       // which thread or rank took which cluster.
       const auto& list = owned[static_cast<std::size_t>(rank_)];
-      const std::size_t first = std::min(list.size(), w * wave), last = std::min(list.size(), (w + 1) * wave);
+      const std::size_t last = std::min(list.size(), wave_end[w]), first = std::min(last, w ? wave_end[w - 1] : 0);
 #pragma omp parallel for schedule(dynamic, 1)
       for (std::ptrdiff_t kk = std::ptrdiff_t(first); kk < std::ptrdiff_t(last); ++kk) {
         omp_set_num_threads(1);  // Eigen sequential in this cluster's task
@@ -745,7 +837,7 @@ class LpcaCompressor {
         const auto& m = members[static_cast<std::size_t>(k)];
         RowMatrixXf& x = X[static_cast<std::size_t>(k)];
         if (x.rows() == 0) x.resize(static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d_));
-        for (std::size_t i = 0; i < m.size(); ++i)
+        for (std::size_t i = 0; i < m.size() && !ooc_; ++i)
           if (m[i] >= t0_ && m[i] < t1_) x.row(Eigen::Index(i)) = A_.row(static_cast<Eigen::Index>(m[i] - t0_));
         f.pca[static_cast<std::size_t>(k)] = Pca(x, MakeRequest(o_, std::uint64_t(k)));
         x.resize(0, 0);
@@ -762,6 +854,20 @@ class LpcaCompressor {
     double res = 0;
     for (const PcaResult& p : f.pca) res += p.residual_energy;
     f.error = total_ > 0 ? std::sqrt(res / total_) : 0;
+  }
+
+  // Out of core: X[k] = the member rows (texel order) of clusters list[first, last), one pass.
+  void ReadClusterRows(const std::vector<std::vector<std::size_t>>& members, const std::vector<int>& list,
+                       std::size_t first, std::size_t last, std::vector<RowMatrixXf>& X) const {
+    std::vector<std::size_t> texels;
+    std::vector<float*> rows;
+    for (std::size_t j = first; j < last; ++j) {
+      const auto& m = members[static_cast<std::size_t>(list[j])];
+      RowMatrixXf& x = X[static_cast<std::size_t>(list[j])];
+      x.resize(static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d_));
+      for (std::size_t i = 0; i < m.size(); ++i) texels.push_back(m[i]), rows.push_back(x.row(Eigen::Index(i)).data());
+    }
+    ReadRows(texels, rows);
   }
 
   // Whether this rank holds any of these (sorted) texels.
@@ -790,8 +896,8 @@ class LpcaCompressor {
     for (int k = 0; k < K; ++k)
       for (int j = 0; j < std::max(ck[static_cast<std::size_t>(k)], 0); ++j)
         me(k, j) = big.row(k).cast<double>().dot(big.row(K + Eigen::Index(k) * c + j).cast<double>());
-    std::vector<std::uint8_t> changed(local(), 0);
-    ForBlocks(local(), [&](std::size_t b, std::size_t count) {
+    std::vector<std::uint8_t> changed(N_, 0);
+    ForChunks([&] { ForBlocks(local(), [&](std::size_t b, std::size_t count) {
       const Eigen::Index w = static_cast<Eigen::Index>(count);
       const Eigen::MatrixXf P = A_.middleRows(static_cast<Eigen::Index>(b), w) * big.transpose();
       for (Eigen::Index i = 0; i < w; ++i) {
@@ -808,10 +914,10 @@ class LpcaCompressor {
           if (r < best) best = r, arg = k;
         }
         residual_[ti] = std::max(best, 0.0);
-        changed[ti - t0_] = arg != assign[ti];
+        changed[ti] = arg != assign[ti];
         assign[ti] = arg;
       }
-    });
+    }); });
     std::uint64_t moved = std::accumulate(changed.begin(), changed.end(), std::uint64_t(0));
     if (R_ > 1) {  // share this rank's texels' assignments and residuals
       const std::vector<std::int32_t> a =
@@ -896,7 +1002,11 @@ class LpcaCompressor {
   const Reporter& rep_;
   const std::size_t N_, d_;
   const int R_, rank_;          // ranks, this rank
-  const std::size_t t0_, t1_;   // this rank's texels [t0_, t1_)
+  std::size_t t0_, t1_;         // this rank's texels [t0_, t1_) (out of core: the chunk in A_)
+  bool ooc_ = false;            // out of core: A_ holds one chunk of chunk_ texels at a time
+  double budget_ = 0;           // out of core: bytes of one chunk or one wave of cluster rows
+  std::size_t chunk_ = 0;
+  std::vector<double> chunk_norms_;  // squared norms of A_'s rows
   int K_ = 0;
   RowMatrixXf A_;               // this rank's texels' rows
   Eigen::VectorXd norms_;       // every texel's squared norm

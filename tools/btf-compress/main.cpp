@@ -116,6 +116,8 @@ int main(int argc, char** argv) {
   app.add_flag("--log", co.log_transform, "Compress log(x + epsilon) (HDR data); recorded in the codec");
   app.add_option("--log-epsilon", co.log_epsilon, "Epsilon of --log, in data units");
   app.add_option("--max-iterations", co.max_iterations, "LPCA: PCA/reassignment rounds at most");
+  app.add_option("--lpca-memory", co.lpca_memory,
+                 "LPCA: auto (out of core above the memory limit), in-core or out-of-core (stream the view slots)");
   app.add_option("--min-improvement", co.min_improvement, "LPCA: stop when a round improves the error by less");
   app.add_option("--storage", cf.storage, "Coefficient storage: float (float32) or half (float16, half the size)");
   app.add_option("--scene", cf.scene, "scene.json: keep only the directions, mip level and channels a scene uses");
