@@ -22,6 +22,7 @@
 
 #include "libbtf/compress/codec.h"
 #include "libbtf/compress/pca.h"
+#include "bench/synthetic_btf.h"
 
 namespace {
 
@@ -32,41 +33,14 @@ int Resolution() {
   return e ? std::max(4, std::atoi(e)) : 64;
 }
 
-// Deterministic cheap noise in [-1, 1).
-inline float Hash(std::uint64_t x) {
-  x += 0x9E3779B97F4A7C15ull;
-  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
-  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
-  x ^= x >> 31;
-  return float(double(x >> 11) * 0x1.0p-53 * 2 - 1);
-}
-
 const btf::Dataset& Data() {
   static std::unique_ptr<btf::Dataset> d;
   if (d) return *d;
   const int n = Resolution();
   const btf::Sampling s = btf::Sampling::Bonn81();
   d = std::make_unique<btf::Dataset>(s, s, n, n, 3);
-  const int L = 81, rank = 12, materials = 8;
-  const std::size_t T = std::size_t(n) * n;
 #pragma omp parallel for schedule(dynamic)
-  for (int v = 0; v < 81; ++v) {
-    for (int l = 0; l < L; ++l) {
-      float* img = d->image(v, l).data();
-      float a[rank];
-      for (int r = 0; r < rank; ++r)
-        a[r] = std::cos(float(r + 1) * float(s[l].x() + 0.5 * s[l].y()) + 0.1f * v) / float(r + 1);
-      for (std::size_t t = 0; t < T; ++t) {
-        const int m = int((t * 2654435761u) >> 7) % materials;
-        for (int c = 0; c < 3; ++c) {
-          float x = 1.0f + 0.2f * m + 0.1f * c;
-          for (int r = 0; r < rank; ++r) x += 0.2f * a[r] * Hash((std::uint64_t(v) * 64 + r) * 1315423911u + m * 7 + c) *
-                                               (1 + 0.3f * Hash(t * 977 + r));
-          img[t * 3 + c] = x * (1 + 0.01f * Hash((std::uint64_t(v) * L + l) * T * 3 + t * 3 + c));
-        }
-      }
-    }
-  }
+  for (int v = 0; v < 81; ++v) btf::bench::SyntheticViewSlot(s, n, v, d->image(v, 0).data());
   return *d;
 }
 
