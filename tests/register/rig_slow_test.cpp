@@ -104,13 +104,13 @@ TEST(RigAccuracy, CalibrateRecoversTheWideAngleCamera) {
 TEST(RigAccuracy, CalibrateFisheyeRecoversTheFisheyeCamera) {
   // The calibration set (15 AprilGrid photos, 640 x 480, f = 500 px, views 0-14 of bonn81,
   // 90 mm away) through a fisheye lens (OpenCV's equidistant model) with k1..k4 = 0.08, -0.02, 0, 0.
-  // `calibrate --model fisheye` fits all four coefficients. Bounds: fx, fy within 0.2 % and
-  // RMS <= 0.1 px (the radtan bounds); the lens itself is checked where the photos
-  // constrain it: the image radius of the recovered lens, rd(theta) = f theta_d(theta), within
-  // 0.1 px of the true one at every angle up to the image corner (theta = atan(400 / 500) = 38.7
-  // deg; 0.1 px is the corners' own RMS, so a better fit cannot be asked of the photos). k1 alone
-  // is bounded within 10 %: at theta <= 0.68 rad, k1 theta^2 and k2 theta^4 (and k3, k4 further
-  // up) trade off against each other, which the printed figures show.
+  // `calibrate --model fisheye` fits all four coefficients. Bounds: the radtan ones (fx,
+  // fy within 0.2 %, k1 within 2 %, RMS <= 0.1 px); k2..k4 are not bounded one by one: at
+  // theta <= 0.68 rad (the image corner, atan(400 / 500)) k2 theta^4, k3 theta^6 and k4 theta^8
+  // trade off against each other (measured k3 -0.052, k4 0.087 against 0). The lens as a whole is
+  // checked instead: the image radius rd(theta) = fx theta_d(theta) of the recovered lens within
+  // 0.2 % of the corner radius (the focal bound carried to the radius; 0.68 px) of the true one
+  // at every angle up to the image corner.
   const auto dir = test::TempDir();
   const std::string synth = test::Tool("btf-synth") +
                             " photos --quiet --target aprilgrid --views 0-14 --lights 0 --width 640 --height 480 "
@@ -144,10 +144,11 @@ TEST(RigAccuracy, CalibrateFisheyeRecoversTheFisheyeCamera) {
   EXPECT_EQ(j["views_used"], 15);
   EXPECT_LT(std::abs(k.fx / 500 - 1), 0.002);
   EXPECT_LT(std::abs(k.fy / 500 - 1), 0.002);
-  EXPECT_LT(std::abs(k.k1 / 0.08 - 1), 0.10);
-  EXPECT_LT(worst, 0.1);
+  EXPECT_LT(std::abs(k.k1 / 0.08 - 1), 0.02);
+  EXPECT_LT(worst, 0.002 * rd(m.photos[0].camera, std::atan(0.8)));
   EXPECT_LE(c.rms_px, 0.1);
-  // The radtan model cannot follow this lens as well (its RMS is printed; no bound).
+  // For comparison only (printed, no bound): radtan with k1, k2, p1, p2, k3 fits this lens about as
+  // well at this field of view (measured RMS 0.0770 px, as the fisheye fit).
   ASSERT_EQ(test::RunCommand(test::Tool("btf-register") + " calibrate --quiet --json " + (dir / "manifest.json").string() +
                                  " --board " + (dir / "board.json").string() + " -o " + (dir / "radtan.json").string(),
                              &out),
