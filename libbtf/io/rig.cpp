@@ -1,5 +1,6 @@
 #include "libbtf/io/rig.h"
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <set>
@@ -425,17 +426,26 @@ CameraModel CameraFromJson(const Node& n) {
   if (!(c.fx > 0 && c.fy > 0)) n.Fail("fx and fy must be > 0");
   c.cx = n["cx"].Double();
   c.cy = n["cy"].Double();
+  c.model = n.Has("model") ? n["model"].String() : "radtan";
+  if (c.model != "radtan" && c.model != "fisheye") n["model"].Fail("must be 'radtan' or 'fisheye'");
   c.k1 = n.Has("k1") ? n["k1"].Double() : 0.0;
   c.k2 = n.Has("k2") ? n["k2"].Double() : 0.0;
-  c.p1 = n.Has("p1") ? n["p1"].Double() : 0.0;
-  c.p2 = n.Has("p2") ? n["p2"].Double() : 0.0;
   c.k3 = n.Has("k3") ? n["k3"].Double() : 0.0;
+  if (c.fisheye()) {
+    c.k4 = n.Has("k4") ? n["k4"].Double() : 0.0;
+  } else {
+    c.p1 = n.Has("p1") ? n["p1"].Double() : 0.0;
+    c.p2 = n.Has("p2") ? n["p2"].Double() : 0.0;
+  }
   return c;
 }
 json CameraToJson(const CameraModel& c) {
   json j{{"width", c.width}, {"height", c.height}, {"fx", c.fx}, {"fy", c.fy},
          {"cx", c.cx},       {"cy", c.cy},         {"k1", c.k1}, {"k2", c.k2}};
-  if (c.has_extended_distortion()) j["p1"] = c.p1, j["p2"] = c.p2, j["k3"] = c.k3;  // only when used
+  if (c.fisheye())
+    j["model"] = c.model, j["k3"] = c.k3, j["k4"] = c.k4;  // radtan (no "model") as before
+  else if (c.has_extended_distortion())
+    j["p1"] = c.p1, j["p2"] = c.p2, j["k3"] = c.k3;  // only when used
   return j;
 }
 }  // namespace
@@ -444,11 +454,11 @@ CameraFile ReadCameraFile(const std::filesystem::path& path) {
   const json j = LoadJson(path);
   const Node root(&path, &j, "");
   CameraFile f;
-  f.model = root.Has("model") ? root["model"].String() : "radtan";
-  if (f.model != "radtan" && f.model != "fisheye") root["model"].Fail("must be 'radtan' or 'fisheye'");
+  CameraModel& c = f.camera;
+  c.model = root.Has("model") ? root["model"].String() : "radtan";
+  if (c.model != "radtan" && c.model != "fisheye") root["model"].Fail("must be 'radtan' or 'fisheye'");
   const Node size = root["image_size"];
   size.ArraySize(2);
-  CameraModel& c = f.camera;
   c.width = size.At(0).Int();
   c.height = size.At(1).Int();
   if (c.width < 1 || c.height < 1) size.Fail("width and height must be >= 1");
@@ -457,14 +467,14 @@ CameraFile ReadCameraFile(const std::filesystem::path& path) {
   if (!(c.fx > 0 && c.fy > 0)) root.Fail("fx and fy must be > 0");
   c.cx = root["cx"].Double();
   c.cy = root["cy"].Double();
-  if (f.model == "radtan") {
-    c.k1 = root["k1"].Double();
-    c.k2 = root["k2"].Double();
+  c.k1 = root["k1"].Double();
+  c.k2 = root["k2"].Double();
+  c.k3 = root["k3"].Double();
+  if (c.fisheye()) {
+    c.k4 = root["k4"].Double();
+  } else {
     c.p1 = root["p1"].Double();
     c.p2 = root["p2"].Double();
-    c.k3 = root["k3"].Double();
-  } else {
-    for (int i = 0; i < 4; ++i) f.fisheye_k[i] = root[fmt::format("k{}", i + 1)].Double();
   }
   f.rms_px = root.Has("rms_px") ? root["rms_px"].Double() : 0.0;
   return f;
@@ -473,15 +483,14 @@ CameraFile ReadCameraFile(const std::filesystem::path& path) {
 void WriteCameraFile(const std::filesystem::path& path, const CameraFile& f, const nlohmann::json& extra) {
   const CameraModel& c = f.camera;
   json j = Header("libbtf-camera");
-  j["model"] = f.model;
+  j["model"] = c.model;
   j["convention"] = "OpenCV: pixel centres at integer coordinates, (0,0) = centre of the top-left pixel";
   j["image_size"] = json::array({c.width, c.height});
   j["fx"] = c.fx, j["fy"] = c.fy, j["cx"] = c.cx, j["cy"] = c.cy;
-  if (f.model == "radtan") {
+  if (c.fisheye())
+    j["k1"] = c.k1, j["k2"] = c.k2, j["k3"] = c.k3, j["k4"] = c.k4;
+  else
     j["k1"] = c.k1, j["k2"] = c.k2, j["p1"] = c.p1, j["p2"] = c.p2, j["k3"] = c.k3;
-  } else {
-    for (int i = 0; i < 4; ++i) j[fmt::format("k{}", i + 1)] = f.fisheye_k[i];
-  }
   j["rms_px"] = f.rms_px;
   if (extra.is_object())
     for (const auto& [k, v] : extra.items()) j[k] = v;
@@ -664,6 +673,13 @@ bool ProjectToPixel(const CameraModel& camera, const Eigen::Matrix3d& R, const V
   if (!(c.z() > 1e-9)) return false;
   const double x = c.x() / c.z(), y = c.y() / c.z();
   const double r2 = x * x + y * y;
+  if (camera.fisheye()) {  // cv::fisheye::projectPoints, alpha = 0
+    const double r = std::sqrt(r2), th = std::atan(r), t2 = th * th;
+    const double thd = th * (1 + t2 * (camera.k1 + t2 * (camera.k2 + t2 * (camera.k3 + t2 * camera.k4))));
+    const double s = r > 1e-8 ? thd / r : 1.0;
+    *pixel = Vec2(camera.fx * x * s + camera.cx, camera.fy * y * s + camera.cy);
+    return true;
+  }
   if (camera.has_extended_distortion()) {  // OpenCV radtan; the branch keeps k1/k2-only results bit for bit
     const double f = 1 + camera.k1 * r2 + camera.k2 * r2 * r2 + camera.k3 * r2 * r2 * r2;
     const double xd = x * f + 2 * camera.p1 * x * y + camera.p2 * (r2 + 2 * x * x);
@@ -674,6 +690,53 @@ bool ProjectToPixel(const CameraModel& camera, const Eigen::Matrix3d& R, const V
   const double f = 1 + camera.k1 * r2 + camera.k2 * r2 * r2;
   *pixel = Vec2(camera.fx * x * f + camera.cx, camera.fy * y * f + camera.cy);
   return true;
+}
+
+bool UndistortNormalized(const CameraModel& camera, const Vec2& d, Vec2* ray) {
+  if (camera.fisheye()) {
+    const double thd = d.norm();
+    if (!(thd > 1e-8)) {
+      *ray = d;
+      return std::isfinite(thd);
+    }
+    const double k1 = camera.k1, k2 = camera.k2, k3 = camera.k3, k4 = camera.k4;
+    double th = std::min(thd, 1.5);  // Newton from theta = theta_d (OpenCV's start), inside (0, pi/2)
+    for (int it = 0; it < 20; ++it) {
+      const double t2 = th * th;
+      const double f = th * (1 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4)))) - thd;
+      const double df = 1 + t2 * (3 * k1 + t2 * (5 * k2 + t2 * (7 * k3 + t2 * 9 * k4)));
+      if (!(df > 0)) return false;  // past the lens's fold: theta_d(theta) no longer increases
+      const double step = f / df;
+      th -= step;
+      if (!(th > 0 && th < 0.5 * kPi)) return false;  // no ray in front of the camera maps here
+      if (std::abs(step) < 1e-14) break;
+    }
+    const double t2 = th * th;
+    if (std::abs(th * (1 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4)))) - thd) > 1e-9) return false;
+    *ray = d * (std::tan(th) / thd);
+    return true;
+  }
+  double x = d.x(), y = d.y();
+  if (!camera.has_extended_distortion()) {
+    if (camera.k1 != 0 || camera.k2 != 0)
+      for (int it = 0; it < 20; ++it) {
+        const double r2 = x * x + y * y;
+        const double s = 1 + camera.k1 * r2 + camera.k2 * r2 * r2;
+        x = d.x() / s;
+        y = d.y() / s;
+      }
+  } else {  // cv::undistortPoints' iteration
+    for (int it = 0; it < 20; ++it) {
+      const double r2 = x * x + y * y;
+      const double icdist = 1 / (1 + ((camera.k3 * r2 + camera.k2) * r2 + camera.k1) * r2);
+      const double dx = 2 * camera.p1 * x * y + camera.p2 * (r2 + 2 * x * x);
+      const double dy = camera.p1 * (r2 + 2 * y * y) + 2 * camera.p2 * x * y;
+      x = (d.x() - dx) * icdist;
+      y = (d.y() - dy) * icdist;
+    }
+  }
+  *ray = Vec2(x, y);
+  return std::isfinite(x) && std::isfinite(y);
 }
 
 Eigen::Matrix3d PlaneHomography(const CameraModel& camera, const Eigen::Matrix3d& R, const Vec3& t, double plane_z) {

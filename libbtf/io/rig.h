@@ -77,16 +77,20 @@ std::vector<std::uint8_t> ArucoMarkerModules(const std::string& dictionary, int 
 struct CameraModel {
   int width = 0, height = 0;
   double fx = 0, fy = 0, cx = 0, cy = 0;  // OpenCV convention
-  double k1 = 0, k2 = 0;                  // radial distortion (OpenCV model)
-  double p1 = 0, p2 = 0, k3 = 0;          // tangential and third radial term (OpenCV radtan; from calibration)
-  bool has_extended_distortion() const { return p1 != 0 || p2 != 0 || k3 != 0; }
+  // Lens model "radtan" (OpenCV calibrateCamera): k1, k2 radial, p1, p2 tangential, k3 third radial
+  // (p1, p2, k3 from calibration). "fisheye" (OpenCV cv::fisheye, equidistant): k1..k4 with
+  // theta_d = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8); p1, p2 unused (0).
+  double k1 = 0, k2 = 0;
+  double p1 = 0, p2 = 0, k3 = 0;
+  double k4 = 0;
+  std::string model = "radtan";
+  bool fisheye() const { return model == "fisheye"; }
+  bool has_extended_distortion() const { return !fisheye() && (p1 != 0 || p2 != 0 || k3 != 0); }
 };
 
-// camera.json (btf-register calibrate): the intrinsics, their model and the fit's RMS.
+// camera.json (btf-register calibrate): the intrinsics with their lens model, and the fit's RMS.
 struct CameraFile {
-  std::string model = "radtan";  // "radtan" (k1, k2, p1, p2, k3) or "fisheye" (k1..k4, OpenCV fisheye)
-  CameraModel camera;            // radtan coefficients in k1, k2, p1, p2, k3
-  double fisheye_k[4] = {0, 0, 0, 0};
+  CameraModel camera;
   double rms_px = 0;
 };
 CameraFile ReadCameraFile(const std::filesystem::path& path);
@@ -94,9 +98,16 @@ void WriteCameraFile(const std::filesystem::path& path, const CameraFile& camera
 
 // The camera projection shared by photo synthesis and registration (docs/conventions.md): plate
 // point p (mm, z above the material surface) -> pixel (OpenCV convention), through the pose
-// camera_from_plate (R, t) and radial distortion k1, k2. False if p is not in front of the camera.
+// camera_from_plate (R, t) and the lens (radtan as cv::projectPoints, fisheye as
+// cv::fisheye::projectPoints with zero skew). False if p is not in front of the camera.
 bool ProjectToPixel(const CameraModel& camera, const Eigen::Matrix3d& camera_from_plate_rotation,
                     const Vec3& camera_from_plate_translation, const Vec3& p, Vec2* pixel);
+
+// The inverse of the lens: distorted normalized image coordinates ((u - cx) / fx, (v - cy) / fy) ->
+// the ray (x / z, y / z). radtan k1, k2 only (what btf-synth renders): 20 fixed-point steps; fisheye:
+// Newton on theta_d(theta) as cv::fisheye::undistortPoints. False where no ray in front of the
+// camera maps there (fisheye: theta beyond 90 degrees or past the lens's fold).
+bool UndistortNormalized(const CameraModel& camera, const Vec2& distorted, Vec2* ray);
 
 // The homography plate plane z = plane_z (mm) -> undistorted pixels, normalized to h33 = 1.
 Eigen::Matrix3d PlaneHomography(const CameraModel& camera, const Eigen::Matrix3d& camera_from_plate_rotation,

@@ -60,12 +60,12 @@ std::vector<std::string> CalibrateSummary::Outliers() const {
 
 nlohmann::json CalibrateSummary::ToJson() const {
   const CameraModel& c = camera.camera;
-  nlohmann::json cam = {{"model", camera.model}, {"image_size", {c.width, c.height}}, {"fx", c.fx}, {"fy", c.fy},
+  nlohmann::json cam = {{"model", c.model}, {"image_size", {c.width, c.height}}, {"fx", c.fx}, {"fy", c.fy},
                         {"cx", c.cx},         {"cy", c.cy}};
-  if (camera.model == "radtan") {
+  if (!c.fisheye()) {
     cam["k1"] = c.k1, cam["k2"] = c.k2, cam["p1"] = c.p1, cam["p2"] = c.p2, cam["k3"] = c.k3;
   } else {
-    for (int i = 0; i < 4; ++i) cam[fmt::format("k{}", i + 1)] = camera.fisheye_k[i];
+    cam["k1"] = c.k1, cam["k2"] = c.k2, cam["k3"] = c.k3, cam["k4"] = c.k4;
   }
   cam["rms_px"] = camera.rms_px;
   nlohmann::json vs = nlohmann::json::array();
@@ -81,14 +81,13 @@ nlohmann::json CalibrateSummary::ToJson() const {
 
 std::string CalibrateSummary::Report() const {
   const CameraModel& c = camera.camera;
-  std::string r = fmt::format("{} model, {} x {} px, {} of {} photos, {} corners: RMS {:.4f} px\n", camera.model,
+  std::string r = fmt::format("{} model, {} x {} px, {} of {} photos, {} corners: RMS {:.4f} px\n", c.model,
                               c.width, c.height, views_used, views.size(), corners_used, camera.rms_px);
   r += fmt::format("fx {:.4f}  fy {:.4f}  cx {:.4f}  cy {:.4f}\n", c.fx, c.fy, c.cx, c.cy);
-  if (camera.model == "radtan")
+  if (!c.fisheye())
     r += fmt::format("k1 {:.6f}  k2 {:.6f}  p1 {:.6f}  p2 {:.6f}  k3 {:.6f}\n", c.k1, c.k2, c.p1, c.p2, c.k3);
   else
-    r += fmt::format("k1 {:.6f}  k2 {:.6f}  k3 {:.6f}  k4 {:.6f}\n", camera.fisheye_k[0], camera.fisheye_k[1],
-                     camera.fisheye_k[2], camera.fisheye_k[3]);
+    r += fmt::format("k1 {:.6f}  k2 {:.6f}  k3 {:.6f}  k4 {:.6f}\n", c.k1, c.k2, c.k3, c.k4);
   for (const auto& v : views) {
     if (v.used)
       r += fmt::format("  {}: {} markers, {} corners, RMS {:.4f} px{}\n", v.file, v.markers, v.corners, v.rms_px,
@@ -217,14 +216,14 @@ CalibrateSummary CalibrateCamera(const CalibrateOptions& o, const std::vector<st
   }
   if (K.empty() || !std::isfinite(sum.camera.rms_px)) ThrowBadInput("calibrate: the fit failed (degenerate views)");
   CameraModel& c = sum.camera.camera;
-  sum.camera.model = o.model;
+  c.model = o.model;
   c.width = width, c.height = height;
   c.fx = K.at<double>(0, 0), c.fy = K.at<double>(1, 1), c.cx = K.at<double>(0, 2), c.cy = K.at<double>(1, 2);
   const auto coef = [&](int i) { return i < static_cast<int>(dist.total()) ? dist.at<double>(i) : 0.0; };
   if (o.model == "radtan") {
     c.k1 = coef(0), c.k2 = coef(1), c.p1 = coef(2), c.p2 = coef(3), c.k3 = coef(4);
   } else {
-    for (int i = 0; i < 4; ++i) sum.camera.fisheye_k[i] = coef(i);
+    c.k1 = coef(0), c.k2 = coef(1), c.k3 = coef(2), c.k4 = coef(3);
   }
   // Per-photo reprojection RMS; outliers against the median.
   std::vector<double> rms;

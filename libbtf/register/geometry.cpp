@@ -62,7 +62,9 @@ PhotoGeometry EstimateGeometry(const Board& board, const std::vector<TagDetectio
   cv::Mat K, dist;
   if (pose) {
     K = (cv::Mat_<double>(3, 3) << camera->fx, 0, camera->cx, 0, camera->fy, camera->cy, 0, 0, 1);
-    if (camera->has_extended_distortion())
+    if (camera->fisheye())
+      dist = (cv::Mat_<double>(4, 1) << camera->k1, camera->k2, camera->k3, camera->k4);
+    else if (camera->has_extended_distortion())
       dist = (cv::Mat_<double>(1, 5) << camera->k1, camera->k2, camera->p1, camera->p2, camera->k3);
     else
       dist = (cv::Mat_<double>(1, 4) << camera->k1, camera->k2, 0, 0);
@@ -81,9 +83,12 @@ PhotoGeometry EstimateGeometry(const Board& board, const std::vector<TagDetectio
     }
   // Undistorted pixels for the robust homography (RANSAC only screens outliers, notes 4.2).
   std::vector<cv::Point2f> ideal;
+  std::vector<cv::Point2d> und;
   if (pose) {
-    std::vector<cv::Point2d> und;
-    cv::undistortPoints(image_px, und, K, dist, cv::noArray(), K);
+    if (camera->fisheye())
+      cv::fisheye::undistortPoints(image_px, und, K, dist, cv::noArray(), K);
+    else
+      cv::undistortPoints(image_px, und, K, dist, cv::noArray(), K);
     for (const auto& p : und) ideal.emplace_back(static_cast<float>(p.x), static_cast<float>(p.y));
   } else {
     for (const auto& p : image_px) ideal.emplace_back(static_cast<float>(p.x), static_cast<float>(p.y));
@@ -97,6 +102,7 @@ PhotoGeometry EstimateGeometry(const Board& board, const std::vector<TagDetectio
   std::vector<cv::Point2f> in_xy;
   std::vector<cv::Point2d> in_px;
   std::vector<cv::Point2f> in_ideal;
+  std::vector<cv::Point2d> in_und;  // undistorted px in double (the fisheye pose)
   for (std::size_t i = 0; i < uses.size(); ++i) {
     bool ok = true;
     for (int k = 0; k < 4; ++k) ok &= mask[4 * i + k] != 0;
@@ -114,6 +120,7 @@ PhotoGeometry EstimateGeometry(const Board& board, const std::vector<TagDetectio
       in_xy.push_back(plate_xy[4 * i + k]);
       in_px.push_back(image_px[4 * i + k]);
       in_ideal.push_back(ideal[4 * i + k]);
+      if (pose) in_und.push_back(und[4 * i + k]);
     }
   }
   if (static_cast<int>(g.used_ids.size()) < options.min_markers)
@@ -126,9 +133,14 @@ PhotoGeometry EstimateGeometry(const Board& board, const std::vector<TagDetectio
     g.camera = *camera;
     cv::Mat rvec, tvec;
     // SQPnP takes general 3D points (markers at different heights); then LM on all inlier corners.
-    if (!cv::solvePnP(in3, in_px, K, dist, rvec, tvec, false, cv::SOLVEPNP_SQPNP))
+    // OpenCV's PnP knows radtan only: a fisheye pose is fitted to the corners undistorted by
+    // cv::fisheye::undistortPoints, without distortion.
+    const bool fe = camera->fisheye();
+    const std::vector<cv::Point2d>& pnp_px = fe ? in_und : in_px;
+    const cv::Mat pnp_dist = fe ? cv::Mat() : dist;
+    if (!cv::solvePnP(in3, pnp_px, K, pnp_dist, rvec, tvec, false, cv::SOLVEPNP_SQPNP))
       ThrowBadInput("degenerate marker layout: the camera pose cannot be solved from {} corners", in3.size());
-    cv::solvePnPRefineLM(in3, in_px, K, dist, rvec, tvec);
+    cv::solvePnPRefineLM(in3, pnp_px, K, pnp_dist, rvec, tvec);
     cv::Mat Rm;
     cv::Rodrigues(rvec, Rm);
     cv::cv2eigen(Rm, g.camera_from_plate_rotation);

@@ -4,7 +4,7 @@
 // With intrinsics (CameraModel with fx > 0): a full pose (camera_from_plate) from all inlier
 // corners, each at its true 3D position (x, y, h) with h the marker's height above the material
 // surface, so the map is evaluated at the material surface z = 0 and the marker-height parallax
-// (about h tan(theta), notes 4.1) is removed. Lens distortion (k1, k2) is modelled in the fit and
+// (about h tan(theta), notes 4.1) is removed. Lens distortion (radtan or fisheye) is modelled in the fit and
 // in the map. Without intrinsics: one homography from the marker plane, marker height ignored
 // (a warning says so when heights are non-zero).
 #include <optional>

@@ -290,8 +290,6 @@ class Registration {
     ReadReferenceFrames();
     if (!o_.camera.empty()) {
       const CameraFile cf = ReadCameraFile(o_.camera);
-      if (cf.model != "radtan")
-        ThrowBadInput("'{}': model '{}': btf-register run supports the radtan model only", o_.camera.string(), cf.model);
       for (auto& e : manifest_.photos) e.camera = cf.camera;
     }
     const int np = static_cast<int>(manifest_.photos.size());

@@ -114,6 +114,43 @@ void GaussianBlur(Image& img, double sigma) {
       }
 }
 
+// Disc PSF (uniform over a disc of `radius` px, a defocused lens) of every channel, edges clamped.
+// The kernel weight of each pixel is the area of the disc over that pixel (16 x 16 sub-samples), so
+// the kernel is symmetric and its discretisation does not move an edge.
+void DiscBlur(Image& img, double radius) {
+  if (radius <= 0) return;
+  const int r = static_cast<int>(std::ceil(radius));
+  const int side = 2 * r + 1, ns = 16;
+  std::vector<double> k(static_cast<std::size_t>(side * side), 0.0);
+  double sum = 0;
+  for (int dy = -r; dy <= r; ++dy)
+    for (int dx = -r; dx <= r; ++dx) {
+      int in = 0;
+      for (int j = 0; j < ns; ++j)
+        for (int i = 0; i < ns; ++i) {
+          const double x = dx - 0.5 + (i + 0.5) / ns, y = dy - 0.5 + (j + 0.5) / ns;
+          in += x * x + y * y <= radius * radius;
+        }
+      sum += k[static_cast<std::size_t>((dy + r) * side + dx + r)] = in;
+    }
+  for (auto& v : k) v /= sum;
+  const int W = img.width, H = img.height, C = img.channels;
+  Image out(W, H, C);
+#pragma omp parallel for
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x)
+      for (int c = 0; c < C; ++c) {
+        double a = 0;
+        for (int dy = -r; dy <= r; ++dy)
+          for (int dx = -r; dx <= r; ++dx) {
+            const double w = k[static_cast<std::size_t>((dy + r) * side + dx + r)];
+            if (w > 0) a += w * img.at(std::clamp(x + dx, 0, W - 1), std::clamp(y + dy, 0, H - 1), c);
+          }
+        out.at(x, y, c) = static_cast<float>(a);
+      }
+  img = std::move(out);
+}
+
 }  // namespace
 
 void PhotoOptions::Check() const {
@@ -132,6 +169,12 @@ void PhotoOptions::Check() const {
   BTF_CHECK_OPTION(std::isfinite(focal_px) && focal_px >= 0, "focal", ">= 0 px (0 = auto)");
   BTF_CHECK_OPTION(std::isfinite(k1) && std::isfinite(k2) && std::abs(k1) < 1 && std::abs(k2) < 1, "k1/k2",
                    "|k| < 1");
+  BTF_CHECK_OPTION(lens == "radtan" || lens == "fisheye", "lens", "radtan or fisheye");
+  BTF_CHECK_OPTION(lens == "radtan" || (k1 == 0 && k2 == 0), "k1/k2", "0 with lens fisheye (its coefficients are fisheye-k)");
+  BTF_CHECK_OPTION(fisheye_k.size() == 4, "fisheye-k", "4 coefficients k1,k2,k3,k4");
+  for (double k : fisheye_k) BTF_CHECK_OPTION(std::isfinite(k) && std::abs(k) < 1, "fisheye-k", "|k| < 1");
+  BTF_CHECK_OPTION(lens == "fisheye" || (fisheye_k[0] == 0 && fisheye_k[1] == 0 && fisheye_k[2] == 0 && fisheye_k[3] == 0),
+                   "fisheye-k", "0 unless lens is fisheye");
   BTF_CHECK_OPTION(pixel_samples >= 1 && pixel_samples <= 16, "pixel-samples", "1..16 per axis");
   BTF_CHECK_OPTION(std::isfinite(light_distance_mm) && light_distance_mm >= 0, "light-distance", ">= 0 mm");
   BTF_CHECK_OPTION(std::isfinite(light_intensity) && light_intensity >= 0, "light-intensity", ">= 0");
@@ -141,6 +184,11 @@ void PhotoOptions::Check() const {
   BTF_CHECK_OPTION(!(format == "exr" && transfer != "linear"), "transfer", "linear for exr (float)");
   BTF_CHECK_OPTION(jpeg_quality >= 1 && jpeg_quality <= 100, "jpeg-quality", "1..100");
   BTF_CHECK_OPTION(std::isfinite(blur_px) && blur_px >= 0 && blur_px <= 20, "blur", "0..20 px");
+  BTF_CHECK_OPTION(psf == "gaussian" || psf == "disc", "psf", "gaussian or disc");
+  BTF_CHECK_OPTION(std::isfinite(disc_radius_px) && disc_radius_px >= 0 && disc_radius_px <= 20, "disc-radius",
+                   "0..20 px");
+  BTF_CHECK_OPTION(psf == "disc" ? disc_radius_px > 0 && blur_px == 0 : disc_radius_px == 0, "psf",
+                   "disc with --disc-radius > 0 and no --blur; gaussian (--blur) without --disc-radius");
   BTF_CHECK_OPTION(target == "ring" || target == "aprilgrid" || target == "charuco", "target",
                    "ring, aprilgrid or charuco");
   BTF_CHECK_OPTION(charuco_squares_x >= 2 && charuco_squares_y >= 2 && charuco_squares_x <= 100 &&
@@ -267,8 +315,13 @@ CameraPose MakeCamera(const PhotoOptions& o, const Board& board, const Vec3& vie
   c.camera.fx = c.camera.fy = f;
   c.camera.cx = 0.5 * (o.width - 1);
   c.camera.cy = 0.5 * (o.height - 1);
-  c.camera.k1 = o.k1;
-  c.camera.k2 = o.k2;
+  c.camera.model = o.lens;
+  if (o.lens == "fisheye") {
+    c.camera.k1 = o.fisheye_k[0], c.camera.k2 = o.fisheye_k[1], c.camera.k3 = o.fisheye_k[2], c.camera.k4 = o.fisheye_k[3];
+  } else {
+    c.camera.k1 = o.k1;
+    c.camera.k2 = o.k2;
+  }
   c.center = o.camera_distance_mm * v;
   // OpenCV camera: z forward (to the plate center), y down, x = y cross z. Image up follows plate +y.
   const Vec3 zc = -v;
@@ -334,16 +387,10 @@ Image RenderPhoto(const SvbrdfModel& model, const Board& board, const PhotoOptio
         for (int j = 0; j < n; ++j)
           for (int i = 0; i < n; ++i) {
             // Sub-pixel position (OpenCV: pixel center at integer coordinates), undistorted.
-            const double xd = (px + (i + 0.5) / n - 0.5 - K.cx) / K.fx, yd = (py + (j + 0.5) / n - 0.5 - K.cy) / K.fy;
-            double xu = xd, yu = yd;
-            if (K.k1 != 0 || K.k2 != 0)
-              for (int it = 0; it < 20; ++it) {
-                const double r2 = xu * xu + yu * yu;
-                const double s = 1 + K.k1 * r2 + K.k2 * r2 * r2;
-                xu = xd / s;
-                yu = yd / s;
-              }
-            const Vec3 dir = Rt * Vec3(xu, yu, 1);
+            const Vec2 d((px + (i + 0.5) / n - 0.5 - K.cx) / K.fx, (py + (j + 0.5) / n - 0.5 - K.cy) / K.fy);
+            Vec2 u;
+            if (!UndistortNormalized(K, d, &u)) continue;  // no ray of the lens: black
+            const Vec3 dir = Rt * Vec3(u.x(), u.y(), 1);
             if (dir.z() >= 0) continue;  // ray misses the plate: black
             double* a = &acc[static_cast<std::size_t>(px) * 3];
             // Marker cards first (they lie at or above the material surface).
@@ -469,6 +516,7 @@ PhotoSummary SynthesizePhotos(const PhotoOptions& o, const SvbrdfModel& model, c
   manifest.extra["noise_sd"] = o.noise;
   // Keys of the newer options only when they are used (the default manifest stays as it was).
   if (o.blur_px > 0) manifest.extra["blur_sigma_px"] = o.blur_px;
+  if (o.psf == "disc") manifest.extra["psf"] = {{"kind", "disc"}, {"radius_px", o.disc_radius_px}};
   if (o.format == "jpeg") manifest.extra["jpeg_quality"] = o.jpeg_quality;
   if (o.target != "ring") manifest.extra["target"] = o.target;
   if (!o.brackets.empty()) {
@@ -530,7 +578,10 @@ PhotoSummary SynthesizePhotos(const PhotoOptions& o, const SvbrdfModel& model, c
     const CameraPose cam = MakeCamera(o, board, vdir);
     Timer t;
     Image img = RenderPhoto(model, board, o, cam, vdir, ldir);
-    GaussianBlur(img, o.blur_px);
+    if (o.psf == "disc")
+      DiscBlur(img, o.disc_radius_px);
+    else
+      GaussianBlur(img, o.blur_px);
     times.Add("render", t.Seconds());
     t.Restart();
     double peak = 0;

@@ -49,9 +49,14 @@ struct PhotoOptions {
   int width = 1280, height = 960;
   double camera_distance_mm = 500;
   double focal_px = 0;            // 0 = the plate fills 90 % of the image height at 0 deg
-  double k1 = 0, k2 = 0;          // radial distortion (OpenCV model)
+  std::string lens = "radtan";    // lens model: "radtan" (k1, k2 below) or "fisheye" (OpenCV cv::fisheye, fisheye_k)
+  double k1 = 0, k2 = 0;          // radtan: radial distortion (OpenCV model)
+  std::vector<double> fisheye_k = {0, 0, 0, 0};  // fisheye: k1..k4, theta_d = theta (1 + k1 theta^2 + .. + k4 theta^8)
   int pixel_samples = 3;          // per axis, box filter over the pixel
-  double blur_px = 0;             // Gaussian optical blur (PSF) sigma, px, applied to the radiance image
+  std::string psf = "gaussian";   // optical blur (PSF) applied to the radiance image: "gaussian" (sigma blur_px)
+                                  // or "disc" (uniform over a disc of radius disc_radius_px: defocus)
+  double blur_px = 0;             // Gaussian PSF sigma, px (0 = none)
+  double disc_radius_px = 0;      // disc PSF radius, px (psf "disc": > 0)
   // Light.
   double light_distance_mm = 0;   // 0 = directional
   double light_intensity = 0;     // 0 = 1 (directional) or distance^2 (point: irradiance 1 at the center)

@@ -114,12 +114,31 @@ TEST(RigBoards, CameraFileRoundTripAndErrors) {
   f.rms_px = 0.02;
   WriteCameraFile(dir / "camera.json", f);
   const CameraFile r = ReadCameraFile(dir / "camera.json");
-  EXPECT_EQ(r.model, "radtan");
+  EXPECT_EQ(r.camera.model, "radtan");
   EXPECT_EQ(r.camera.width, 640);
   EXPECT_DOUBLE_EQ(r.camera.fx, 500.5);
   EXPECT_DOUBLE_EQ(r.camera.k3, 0.001);
   EXPECT_DOUBLE_EQ(r.camera.p2, -2e-4);
   EXPECT_DOUBLE_EQ(r.rms_px, 0.02);
+  // A fisheye camera: k1..k4, no p1, p2.
+  f.camera.model = "fisheye";
+  f.camera.p1 = f.camera.p2 = 0, f.camera.k4 = -0.003;
+  WriteCameraFile(dir / "fisheye.json", f);
+  const CameraFile fe = ReadCameraFile(dir / "fisheye.json");
+  EXPECT_TRUE(fe.camera.fisheye());
+  EXPECT_DOUBLE_EQ(fe.camera.k1, -0.15);
+  EXPECT_DOUBLE_EQ(fe.camera.k3, 0.001);
+  EXPECT_DOUBLE_EQ(fe.camera.k4, -0.003);
+  EXPECT_FALSE(fe.camera.has_extended_distortion());
+  Write(dir / "model.json", R"({"model": "pinhole", "image_size": [640, 480], "fx": 500, "fy": 500, "cx": 320, "cy": 240})");
+  try {
+    ReadCameraFile(dir / "model.json");
+    FAIL() << "no error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ExitCode::kBadInput);
+    EXPECT_NE(std::string(e.what()).find("model.json"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("must be 'radtan' or 'fisheye'"), std::string::npos) << e.what();
+  }
   Write(dir / "bad.json", R"({"image_size": [640, 480], "fx": 500, "fy": 500, "cx": 320, "cy": 240, "k1": 0})");
   try {
     ReadCameraFile(dir / "bad.json");

@@ -71,6 +71,22 @@ TEST(BtfSynthCli, BadArgumentsGiveUsageErrors) {
   EXPECT_EQ(test::RunCommand(Synth("btf --params '{bad'" + o)), 2);
   EXPECT_EQ(test::RunCommand(Synth("brdf --views 0")), 2);  // no output named
   EXPECT_EQ(test::RunCommand(Synth("photos --format jpg -o " + dir.string())), 2);
+  // Lens options: an unknown model, radtan coefficients with a fisheye lens, fisheye ones without,
+  // a wrong count: usage errors naming the field.
+  std::string out;
+  EXPECT_EQ(test::RunCommand(Synth("photos --lens pinhole -o " + dir.string()) + " 2>&1", &out), 2);
+  EXPECT_NE(out.find("'lens'"), std::string::npos) << out;
+  EXPECT_EQ(test::RunCommand(Synth("photos --lens fisheye --k1 0.1 -o " + dir.string()) + " 2>&1", &out), 2);
+  EXPECT_NE(out.find("'k1/k2'"), std::string::npos) << out;
+  EXPECT_EQ(test::RunCommand(Synth("photos --fisheye-k 0.1,0,0,0 -o " + dir.string()) + " 2>&1", &out), 2);
+  EXPECT_NE(out.find("'fisheye-k'"), std::string::npos) << out;
+  EXPECT_EQ(test::RunCommand(Synth("photos --lens fisheye --fisheye-k 0.1,0 -o " + dir.string())), 2);
+  // PSF options: disc without a radius, a radius with the Gaussian, both blurs at once.
+  EXPECT_EQ(test::RunCommand(Synth("photos --psf disc -o " + dir.string()) + " 2>&1", &out), 2);
+  EXPECT_NE(out.find("'psf'"), std::string::npos) << out;
+  EXPECT_EQ(test::RunCommand(Synth("photos --disc-radius 1 -o " + dir.string())), 2);
+  EXPECT_EQ(test::RunCommand(Synth("photos --psf disc --disc-radius 1 --blur 0.7 -o " + dir.string())), 2);
+  EXPECT_EQ(test::RunCommand(Synth("photos --psf box -o " + dir.string())), 2);
   EXPECT_FALSE(std::filesystem::exists(dir / "x.h5"));
 }
 

@@ -180,8 +180,10 @@ int main(int argc, char** argv) {
   cp->add_option("--height", po.height, "Image height, px");
   cp->add_option("--camera-distance", po.camera_distance_mm, "Camera distance from the plate centre, mm");
   cp->add_option("--focal", po.focal_px, "Focal length, px (0 = plate fills 90% of the image at 0 deg)");
-  cp->add_option("--k1", po.k1, "Radial distortion k1");
-  cp->add_option("--k2", po.k2, "Radial distortion k2");
+  cp->add_option("--lens", po.lens, "Lens model: radtan (--k1, --k2) | fisheye (OpenCV cv::fisheye, --fisheye-k)");
+  cp->add_option("--k1", po.k1, "Radial distortion k1 (radtan)");
+  cp->add_option("--k2", po.k2, "Radial distortion k2 (radtan)");
+  cp->add_option("--fisheye-k", po.fisheye_k, "Fisheye k1,k2,k3,k4 (with --lens fisheye)")->delimiter(',')->expected(4);
   cp->add_option("--pixel-samples", po.pixel_samples, "Samples per pixel per axis");
   cp->add_option("--light-distance", po.light_distance_mm, "Point light distance, mm (0 = directional)");
   cp->add_option("--light-intensity", po.light_intensity,
@@ -191,7 +193,9 @@ int main(int argc, char** argv) {
   cp->add_option("--format", po.format, "png16 | png8 | jpeg | exr");
   cp->add_option("--transfer", po.transfer, "Integer encoding: linear | srgb (the sRGB curve, tagged in the file)");
   cp->add_option("--jpeg-quality", po.jpeg_quality, "JPEG quality 1..100 (with --format jpeg)");
+  cp->add_option("--psf", po.psf, "Optical blur (PSF): gaussian (--blur sigma) | disc (--disc-radius)");
   cp->add_option("--blur", po.blur_px, "Gaussian optical blur (PSF) sigma, px (0 = none)");
+  cp->add_option("--disc-radius", po.disc_radius_px, "Disc PSF radius, px (with --psf disc)");
   cp->add_option("--target", po.target, "ring (sample with 8 markers) | aprilgrid (Kalibr AprilGrid) | charuco (ChArUco board); the last two: no sample");
   cp->add_option("--family", po.family, "Tag family of the markers");
   cp->add_option("--border-bits", po.border_bits, "Black tag border, modules (0 = 1 for ring, 2 for aprilgrid)");
