@@ -66,7 +66,8 @@ std::string ReplacePaths(std::string s) {
 }
 
 bool IsVolatileKey(const std::string& key) {
-  return key == "times_s" || key == "times" || key == "seconds" || key == "seconds_total" || key == "creation_time";
+  return key == "times_s" || key == "times" || key == "seconds" || key == "seconds_total" || key == "creation_time" ||
+         key == "peak_rss_bytes";  // measurements, like the times
 }
 
 void StripVolatile(nlohmann::json& j) {
