@@ -352,7 +352,7 @@ TEST(RigCli, RunTakesAFisheyeCameraFromCameraJson) {
     return json::parse(in);
   };
   json fisheye;
-  for (const std::string extra : {std::string(), " --camera " + (dir / "camera.json").string()}) {
+  for (const std::string& extra : {std::string(), " --camera " + (dir / "camera.json").string()}) {
     const json r = report(extra);
     fisheye = r;
     for (const auto& p : r["photos"]) {
