@@ -217,41 +217,51 @@ void NormalizeSigns(float* basis, Eigen::Index c, Eigen::Index d, float* weights
 
 WidePcaResult WidePca(const float* X, Eigen::Index n, Eigen::Index d, const PcaRequest& q, bool half,
                       const TileSink& sink) {
-  using TileD = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic>;  // n x w, column-major
+  // Tiles are row-major (n x w) like X, so loading and centring one reads X's rows contiguously
+  // (vectorised); the Gram's rank update and the basis product take either storage order.
+  using TileD = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
   WidePcaResult r;
   r.mean.resize(static_cast<std::size_t>(d));
   MatrixXd G = MatrixXd::Zero(n, n);
   TileD T(n, kWideTile);
-  std::vector<double> colsum(static_cast<std::size_t>(kWideTile));
+  std::vector<double> colsum(static_cast<std::size_t>(kWideTile)), colsq(static_cast<std::size_t>(kWideTile));
   // Loads columns [c0, c0 + w) centred by the stored (float) mean into T.
   auto load_centred = [&](Eigen::Index c0, Eigen::Index w) {
-    for (Eigen::Index j = 0; j < w; ++j) {
-      const double m = r.mean[static_cast<std::size_t>(c0 + j)];
-      for (Eigen::Index i = 0; i < n; ++i) T(i, j) = double(X[i * d + c0 + j]) - m;
+    const float* m = r.mean.data() + c0;
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const float* row = X + i * d + c0;
+      double* t = T.row(i).data();
+      for (Eigen::Index j = 0; j < w; ++j) t[j] = double(row[j]) - double(m[j]);
     }
   };
-  // Pass 1: check, mean, centre, Gram; energies in double.
+  // Pass 1: check, mean, centre, Gram; energies in double. Sums per column (no serial chain
+  // across the tile, so the loops vectorise), added to the totals in column order.
   double total = 0, centred = 0;
   for (Eigen::Index c0 = 0; c0 < d; c0 += kWideTile) {
     const Eigen::Index w = std::min(kWideTile, d - c0);
     std::fill(colsum.begin(), colsum.end(), 0.0);
+    std::fill(colsq.begin(), colsq.end(), 0.0);
     for (Eigen::Index i = 0; i < n; ++i) {
       const float* row = X + i * d + c0;
-      bool finite = true;
       for (Eigen::Index j = 0; j < w; ++j) {
         const double x = row[j];
-        finite &= std::isfinite(row[j]);
         colsum[static_cast<std::size_t>(j)] += x;
-        total += x * x;
+        colsq[static_cast<std::size_t>(j)] += x * x;
       }
-      if (!finite) {
+    }
+    // A NaN or Inf makes its column's sum of squares non-finite (squares of finite floats cannot
+    // overflow a double); then the first non-finite value in row order is located.
+    double tile_sq = 0;
+    for (Eigen::Index j = 0; j < w; ++j) tile_sq += colsq[static_cast<std::size_t>(j)];
+    if (!std::isfinite(tile_sq)) {
+      for (Eigen::Index i = 0; i < n; ++i)
         for (Eigen::Index j = 0; j < w; ++j)
-          if (!std::isfinite(row[j])) {
+          if (!std::isfinite(X[i * d + c0 + j])) {
             r.non_finite = std::int64_t(i * d + c0 + j);
             return r;
           }
-      }
     }
+    total += tile_sq;
     for (Eigen::Index j = 0; j < w; ++j) {
       float m = static_cast<float>(colsum[static_cast<std::size_t>(j)] / double(n));
       r.mean[static_cast<std::size_t>(c0 + j)] = half ? RoundToHalf(m) : m;
