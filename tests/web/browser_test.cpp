@@ -202,6 +202,29 @@ TEST(Browser, PcaViewCylinderEnvAgreesWithTheCpuRender) {
 // btf_schneider.glsl evaluated in the browser (a float render target) against the reference
 // decoder. Queries: every texel at grid nodes of the view and light squares (where trilinear
 // filtering is exact), and random (uv, wi, wo) anywhere on the hemispheres.
+// Queries (uv, wi, wo) for EvaluateInBrowser, 8 floats each, with the texel each is meant for.
+struct Queries {
+  std::vector<float> q;
+  std::vector<int> x, y;
+  void Add(int tx, int ty, const Vec2& uv, const Vec3& wi, const Vec3& wo) {
+    for (double v : {uv.x(), uv.y(), wi.x(), wi.y(), wi.z(), wo.x(), wo.y(), wo.z()}) q.push_back(float(v));
+    x.push_back(tx), y.push_back(ty);
+  }
+  // `count` random texels, uv jittered inside the texel's central half, directions uniform over
+  // the square that HemisphereFromSquare maps.
+  void AddRandom(int W, int H, int count, std::mt19937& rng) {
+    std::uniform_real_distribution<double> u01(0, 1);
+    for (int i = 0; i < count; ++i) {
+      const int tx = int(u01(rng) * W) % W, ty = int(u01(rng) * H) % H;
+      Add(tx, ty, Vec2((tx + 0.25 + 0.5 * u01(rng)) / W, 1 - (ty + 0.25 + 0.5 * u01(rng)) / H),
+          HemisphereFromSquare(Vec2(u01(rng), u01(rng))), HemisphereFromSquare(Vec2(u01(rng), u01(rng))));
+    }
+  }
+  std::size_t size() const { return x.size(); }
+  Vec3 wi(std::size_t i) const { return Vec3(q[i * 8 + 2], q[i * 8 + 3], q[i * 8 + 4]); }
+  Vec3 wo(std::size_t i) const { return Vec3(q[i * 8 + 5], q[i * 8 + 6], q[i * 8 + 7]); }
+};
+
 void ExpectGlslMatchesTheReferenceDecoder(const SchneiderExportOptions& options, int expected_pages) {
   SKIP_WITHOUT_CHROMIUM();
   const auto dir = test::TempDir() / "export";
@@ -209,39 +232,28 @@ void ExpectGlslMatchesTheReferenceDecoder(const SchneiderExportOptions& options,
   const SchneiderReferenceDecoder ref(dir);
   std::ifstream in(dir / "manifest.json");
   ASSERT_EQ(nlohmann::json::parse(in)["atlas"]["pages"], expected_pages);
-  std::vector<float> q;
-  std::vector<int> texel_x, texel_y;
-  auto add = [&](int x, int y, const Vec2& uv, const Vec3& wi, const Vec3& wo) {
-    for (double v : {uv.x(), uv.y(), wi.x(), wi.y(), wi.z(), wo.x(), wo.y(), wo.z()}) q.push_back(float(v));
-    texel_x.push_back(x), texel_y.push_back(y);
-  };
+  Queries qs;
   const int W = ref.width(), H = ref.height(), n = options.view_grid, m = options.light_grid;
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x)
       for (int i = 0; i < 4; ++i) {
         const int sv = (x * 5 + i * 3) % n, tv = (y * 3 + i * 7) % n, sl = (x + y + i * 5) % m, tl = (x * 7 + i) % m;
-        add(x, y, Vec2((x + 0.5) / W, 1 - (y + 0.5) / H), HemisphereFromSquare(Vec2(GridCoordinate(sl, m), GridCoordinate(tl, m))),
-            HemisphereFromSquare(Vec2(GridCoordinate(sv, n), GridCoordinate(tv, n))));
+        qs.Add(x, y, Vec2((x + 0.5) / W, 1 - (y + 0.5) / H), HemisphereFromSquare(Vec2(GridCoordinate(sl, m), GridCoordinate(tl, m))),
+               HemisphereFromSquare(Vec2(GridCoordinate(sv, n), GridCoordinate(tv, n))));
       }
-  const std::size_t grid_queries = texel_x.size();
+  const std::size_t grid_queries = qs.size();
   std::mt19937 rng(17);
-  std::uniform_real_distribution<double> u01(0, 1);
-  for (int i = 0; i < 2048; ++i) {
-    const int x = int(u01(rng) * W) % W, y = int(u01(rng) * H) % H;
-    add(x, y, Vec2((x + 0.25 + 0.5 * u01(rng)) / W, 1 - (y + 0.25 + 0.5 * u01(rng)) / H),
-        HemisphereFromSquare(Vec2(u01(rng), u01(rng))), HemisphereFromSquare(Vec2(u01(rng), u01(rng))));
-  }
+  qs.AddRandom(W, H, 2048, rng);
   std::string renderer;
-  const std::vector<float> got = EvaluateInBrowser(BrowserOptions{}, dir, q, &renderer);
-  ASSERT_EQ(got.size(), texel_x.size() * 3);
+  const std::vector<float> got = EvaluateInBrowser(BrowserOptions{}, dir, qs.q, &renderer);
+  ASSERT_EQ(got.size(), qs.size() * 3);
   double worst_grid = 0, worst_any = 0;
-  for (std::size_t i = 0; i < texel_x.size(); ++i) {
+  for (std::size_t i = 0; i < qs.size(); ++i) {
     float want[3];
-    const Vec3 wi(q[i * 8 + 2], q[i * 8 + 3], q[i * 8 + 4]), wo(q[i * 8 + 5], q[i * 8 + 6], q[i * 8 + 7]);
-    ref.Value(texel_x[i], texel_y[i], wi, wo, want);
+    ref.Value(qs.x[i], qs.y[i], qs.wi(i), qs.wo(i), want);
     // Scale of a value's possible error: sum_f |terms[1 + f]| (each t_f in [0, 1]).
     double scale = 0;
-    for (int f = 0; f < ref.functions(); ++f) scale += std::abs(ref.terms(texel_y[i], texel_x[i])[1 + f]);
+    for (int f = 0; f < ref.functions(); ++f) scale += std::abs(ref.terms(qs.y[i], qs.x[i])[1 + f]);
     for (int c = 0; c < 3; ++c) {
       const double r = std::abs(double(got[i * 3 + c]) - want[c]) / scale;
       (i < grid_queries ? worst_grid : worst_any) = std::max(i < grid_queries ? worst_grid : worst_any, r);
@@ -282,36 +294,26 @@ void ExpectSattlerGlslMatchesTheReferenceDecoder(const SattlerExportOptions& opt
   TwillPcaViewExport(dir, {}, options);
   const SattlerReferenceDecoder ref(dir);
   const Dataset& d = Twill();
-  std::vector<float> q;
-  std::vector<int> texel_x, texel_y;
-  auto add = [&](int x, int y, const Vec2& uv, const Vec3& wi, const Vec3& wo) {
-    for (double v : {uv.x(), uv.y(), wi.x(), wi.y(), wi.z(), wo.x(), wo.y(), wo.z()}) q.push_back(float(v));
-    texel_x.push_back(x), texel_y.push_back(y);
-  };
+  Queries qs;
   const int W = ref.width(), H = ref.height();
   std::mt19937 rng(17);
   std::uniform_real_distribution<double> u01(0, 1);
   for (int i = 0; i < 1024; ++i) {
     const int x = int(u01(rng) * W) % W, y = int(u01(rng) * H) % H;
-    add(x, y, Vec2((x + 0.5) / W, 1 - (y + 0.5) / H), d.lights()[int(u01(rng) * d.num_lights()) % d.num_lights()],
-        d.views()[int(u01(rng) * d.num_views()) % d.num_views()]);
+    qs.Add(x, y, Vec2((x + 0.5) / W, 1 - (y + 0.5) / H), d.lights()[int(u01(rng) * d.num_lights()) % d.num_lights()],
+           d.views()[int(u01(rng) * d.num_views()) % d.num_views()]);
   }
-  const std::size_t sampled_queries = texel_x.size();
-  for (int i = 0; i < 2048; ++i) {
-    const int x = int(u01(rng) * W) % W, y = int(u01(rng) * H) % H;
-    add(x, y, Vec2((x + 0.25 + 0.5 * u01(rng)) / W, 1 - (y + 0.25 + 0.5 * u01(rng)) / H),
-        HemisphereFromSquare(Vec2(u01(rng), u01(rng))), HemisphereFromSquare(Vec2(u01(rng), u01(rng))));
-  }
+  const std::size_t sampled_queries = qs.size();
+  qs.AddRandom(W, H, 2048, rng);
   std::string renderer;
-  const std::vector<float> got = EvaluateInBrowser(BrowserOptions{}, dir, q, &renderer);
-  ASSERT_EQ(got.size(), texel_x.size() * 3);
+  const std::vector<float> got = EvaluateInBrowser(BrowserOptions{}, dir, qs.q, &renderer);
+  ASSERT_EQ(got.size(), qs.size() * 3);
   double worst_sampled = 0, worst_any = 0;
   int off = 0;
-  for (std::size_t i = 0; i < texel_x.size(); ++i) {
+  for (std::size_t i = 0; i < qs.size(); ++i) {
     float want[3];
-    const Vec3 wi(q[i * 8 + 2], q[i * 8 + 3], q[i * 8 + 4]), wo(q[i * 8 + 5], q[i * 8 + 6], q[i * 8 + 7]);
-    ref.Value(texel_x[i], texel_y[i], wi, wo, want);
-    const double scale = ref.ErrorBound(wi, wo) / ref.quantization_bound();
+    ref.Value(qs.x[i], qs.y[i], qs.wi(i), qs.wo(i), want);
+    const double scale = ref.ErrorBound(qs.wi(i), qs.wo(i)) / ref.quantization_bound();
     double r = 0;
     for (int c = 0; c < 3; ++c) r = std::max(r, std::abs(double(got[i * 3 + c]) - want[c]) / scale);
     if (r > 0.1 * ref.quantization_bound()) {
@@ -322,11 +324,11 @@ void ExpectSattlerGlslMatchesTheReferenceDecoder(const SattlerExportOptions& opt
   }
   std::cout << "sattler GLSL vs reference decoder (" << options.storage << "; " << renderer
             << "): worst |diff| / scale = " << worst_sampled << " at sampled directions, " << worst_any
-            << " at random points; " << off << " of " << texel_x.size()
+            << " at random points; " << off << " of " << qs.size()
             << " queries beyond a tenth of the storage bound per t " << ref.quantization_bound() << "\n";
   EXPECT_LE(worst_sampled, 0.1 * ref.quantization_bound());
   EXPECT_LE(worst_any, 0.1 * ref.quantization_bound());
-  EXPECT_LE(off, int(texel_x.size() / 200));  // nearest-three ties: at most 0.5 % of the queries
+  EXPECT_LE(off, int(qs.size() / 200));  // nearest-three ties: at most 0.5 % of the queries
 }
 
 TEST(Browser, SattlerGlslMatchesTheReferenceDecoder) { ExpectSattlerGlslMatchesTheReferenceDecoder({}); }
