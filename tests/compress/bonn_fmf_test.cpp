@@ -103,7 +103,9 @@ class BtfHhWalk {
     const std::size_t start = pos_;
     const auto size = Get<std::uint32_t>(), version = Get<std::uint32_t>();
     Skip(3 * 80 + 4 + 12);  // setup, sensor, light source, ppmm, rgb scale
-    if (version > 1) EXPECT_EQ(Get<std::uint32_t>(), 0u) << "cosine flag (btf.hh: a stub that asserts)";
+    if (version > 1) {
+      EXPECT_EQ(Get<std::uint32_t>(), 0u) << "cosine flag (btf.hh: a stub that asserts)";
+    }
     if (version > 2) Skip(Get<std::uint32_t>());
     if (version > 3) {
       const auto channels = Get<std::uint32_t>();

@@ -19,7 +19,9 @@ TEST(Directions, AnglesRoundTrip) {
       EXPECT_NEAR(d.norm(), 1.0, 1e-15);
       const Angles a = AnglesFromDirection(d);
       EXPECT_NEAR(a.theta, t, 1e-12);
-      if (t > 1e-6) EXPECT_NEAR(a.phi, p, 1e-9);
+      if (t > 1e-6) {
+        EXPECT_NEAR(a.phi, p, 1e-9);
+      }
     }
   // Frame: phi = 0 is +x (weft), phi = 90 deg is +y (warp), theta = 0 is the normal.
   EXPECT_TRUE(DirectionFromAngles(kPi / 2, 0).isApprox(Vec3::UnitX()));

@@ -167,8 +167,9 @@ TEST(Irawan2006, StiffCasesStayFiniteAndContinuous) {
         const Vec3 wi = DirectionFromAngles(t, phi_o);  // retro-reflection wi = wo
         float f[3];
         m->EvalBrdf(wi, wo, f);
-        if (!first)
+        if (!first) {
           for (int c = 0; c < 3; ++c) ASSERT_NEAR(f[c], prev[c], 1e-3 * std::abs(prev[c]) + 1e-7) << m->name();
+        }
         std::copy(f, f + 3, prev);
         first = false;
       }

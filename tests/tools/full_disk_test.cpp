@@ -40,7 +40,9 @@ class FullDisk : public ::testing::Test {
     std::ifstream in(old);
     std::string kept((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
     EXPECT_EQ(kept, "old output") << "the old output was not kept: " << command;
-    if (!marker.empty()) EXPECT_EQ(std::distance(fs::directory_iterator(output), {}), 1) << "files added: " << command;
+    if (!marker.empty()) {
+      EXPECT_EQ(std::distance(fs::directory_iterator(output), {}), 1) << "files added: " << command;
+    }
     for (const auto& e : fs::directory_iterator(mnt_))
       EXPECT_TRUE(e.path() == output || e.path() == filler_) << "left behind: " << e.path();
     fs::remove_all(output);
