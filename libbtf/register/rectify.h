@@ -3,8 +3,9 @@
 //
 // Texel (col, row) covers the plate square x in [-S/2 + col S/N, -S/2 + (col+1) S/N],
 // y in [S/2 - (row+1) S/N, S/2 - row S/N] (S = sample side in mm; row 0 = top = +y).
-// Anti-aliasing: each texel is the mean of n_u x n_v stratified bilinear samples of the photo
-// over its footprint, with n_u, n_v chosen per texel from the projected texel edge lengths
+// Anti-aliasing: each texel is the mean of n_u x n_v stratified samples of the photo (read as
+// RectifyOptions::filter says) over its footprint, with n_u, n_v chosen per texel from the
+// projected texel edge lengths
 // (samples_per_px samples per photo pixel, at least min, at most max_samples_per_axis): the
 // box prefilter over the texel's footprint that plain bilinear warping lacks, with the sample
 // count adapted to each axis separately (oblique views shrink one axis only).
