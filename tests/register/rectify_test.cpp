@@ -7,6 +7,7 @@
 #include "libbtf/register/radiometry.h"
 #include "libbtf/register/rectify.h"
 #include "tests/register/render_util.h"
+#include "tests/test_util.h"
 
 namespace btf {
 namespace {
@@ -192,6 +193,16 @@ TEST(Rectify, SplineFilterKeepsDetailNearThePixelNyquistThatAreaWeightingBlurs) 
   // Measured 0.0242 area, 0.0043 spline (the 0.2 + 0.1 amplitudes at these frequencies). Bound: the
   // spline at least 3 x better.
   EXPECT_LT(es * 3, ea);
+}
+
+TEST(Rectify, UnknownFilterIsAUsageErrorNamingTheOption) {
+  RectifyOptions o;
+  o.filter = "cubic";
+  ExitCode code{};
+  const std::string msg = test::ErrorOf([&] { o.Check(); }, &code);
+  EXPECT_NE(msg.find("'filter'"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("area, bilinear or spline"), std::string::npos) << msg;
+  EXPECT_EQ(code, ExitCode::kUsage);
 }
 
 TEST(Rectify, SamplesOutsideThePhotoAreCounted) {
