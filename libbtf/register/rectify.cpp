@@ -15,6 +15,86 @@ void RectifyOptions::Check() const {
   BTF_CHECK_OPTION(min_samples_per_axis >= 1, "min_samples_per_axis", ">= 1");
   BTF_CHECK_OPTION(max_samples_per_axis >= min_samples_per_axis && max_samples_per_axis <= 64, "max_samples_per_axis",
                    "min_samples_per_axis..64");
+  BTF_CHECK_OPTION(filter == "area" || filter == "bilinear" || filter == "spline", "filter", "area, bilinear or spline");
+}
+
+namespace {
+
+// In place: the coefficients c of sum_j c_j B3(k - j) = s_k (B3 the cubic B-spline: weights 1/6,
+// 4/6, 1/6 at -1, 0, 1) along n values `stride` apart, mirror boundaries. One causal and one
+// anti-causal pass of the pole z = sqrt(3) - 2 (Unser, "Splines: a perfect fit", IEEE SPM 1999;
+// the initial values as in Thevenaz, Blu and Unser, "Interpolation revisited", 2000).
+void CubicSplinePrefilter(double* c, int n, std::ptrdiff_t stride) {
+  if (n < 2) return;
+  const double z = std::sqrt(3.0) - 2.0;
+  auto at = [&](int k) -> double& { return c[static_cast<std::ptrdiff_t>(k) * stride]; };
+  for (int k = 0; k < n; ++k) at(k) *= 6.0;  // (1 - z)(1 - 1/z)
+  // Causal initial value for the mirror-extended signal.
+  const int horizon = static_cast<int>(std::ceil(std::log(1e-15) / std::log(std::abs(z))));
+  double sum = 0;
+  if (horizon < n) {
+    double zn = 1;
+    for (int k = 0; k < horizon; ++k, zn *= z) sum += zn * at(k);
+  } else {
+    double zn = z, z2n = std::pow(z, n - 1);
+    const double iz = 1.0 / z;
+    sum = at(0) + z2n * at(n - 1);
+    z2n *= z2n * iz;
+    for (int k = 1; k <= n - 2; ++k, zn *= z, z2n *= iz) sum += (zn + z2n) * at(k);
+    sum /= 1.0 - zn * zn;
+  }
+  at(0) = sum;
+  for (int k = 1; k < n; ++k) at(k) += z * at(k - 1);
+  at(n - 1) = (z / (z * z - 1.0)) * (z * at(n - 2) + at(n - 1));
+  for (int k = n - 2; k >= 0; --k) at(k) = z * (at(k + 1) - at(k));
+}
+
+int Mirror(int i, int n) { return i < 0 ? std::min(-i, n - 1) : (i >= n ? std::max(2 * (n - 1) - i, 0) : i); }
+
+}  // namespace
+
+SplineImage HistopolatingSpline(const Image& im) {
+  SplineImage sp;
+  sp.width = im.width, sp.height = im.height, sp.channels = im.channels;
+  sp.coeff.assign(im.pixels.begin(), im.pixels.end());
+  const int W = im.width, H = im.height, C = im.channels;
+  // A quadratic B-spline averaged over a unit box is a cubic B-spline: its pixel averages are the
+  // pixels when its coefficients are those of cubic B-spline interpolation of the pixels.
+#pragma omp parallel for schedule(static)
+  for (int y = 0; y < H; ++y)
+    for (int c = 0; c < C; ++c) CubicSplinePrefilter(&sp.coeff[static_cast<std::size_t>(y) * W * C + c], W, C);
+#pragma omp parallel for schedule(static)
+  for (int x = 0; x < W; ++x)
+    for (int c = 0; c < C; ++c)
+      CubicSplinePrefilter(&sp.coeff[static_cast<std::size_t>(x) * C + c], H, static_cast<std::ptrdiff_t>(W) * C);
+  return sp;
+}
+
+bool SampleSpline(const SplineImage& sp, double x, double y, float* out) {
+  const bool inside = x >= -0.5 && y >= -0.5 && x <= sp.width - 0.5 && y <= sp.height - 0.5;
+  // The spline covers every pixel's whole box (mirrored beyond the first and last centres).
+  x = std::clamp(x, -0.5, sp.width - 0.5);
+  y = std::clamp(y, -0.5, sp.height - 0.5);
+  const int ix = static_cast<int>(std::lround(x)), iy = static_cast<int>(std::lround(y));
+  const double tx = x - ix, ty = y - iy;
+  // Quadratic B-spline weights of the nearest coefficient and its two neighbours (|t| <= 1/2).
+  const double wx[3] = {0.5 * (tx - 0.5) * (tx - 0.5), 0.75 - tx * tx, 0.5 * (tx + 0.5) * (tx + 0.5)};
+  const double wy[3] = {0.5 * (ty - 0.5) * (ty - 0.5), 0.75 - ty * ty, 0.5 * (ty + 0.5) * (ty + 0.5)};
+  const int C = sp.channels;
+  std::size_t at[9];
+  double w[9];
+  for (int j = 0; j < 3; ++j)
+    for (int i = 0; i < 3; ++i) {
+      at[j * 3 + i] = (static_cast<std::size_t>(Mirror(iy + j - 1, sp.height)) * sp.width +
+                       static_cast<std::size_t>(Mirror(ix + i - 1, sp.width))) * C;
+      w[j * 3 + i] = wy[j] * wx[i];
+    }
+  for (int c = 0; c < C; ++c) {
+    double a = 0;
+    for (int k = 0; k < 9; ++k) a += w[k] * sp.coeff[at[k] + c];
+    out[c] = static_cast<float>(a);
+  }
+  return inside;
 }
 
 Vec2 TexelCenterMm(double col, double row, int n, double s) {
@@ -46,6 +126,8 @@ Image Rectify(const Image& photo, const PlateToPixel& project, double s, const R
   Image out(n, n, ch);
   long long invalid = 0;
   double max_fp = 0, total_samples = 0;
+  const bool spline = options.filter == "spline";
+  const SplineImage coeff = spline ? HistopolatingSpline(photo) : SplineImage();
 #pragma omp parallel for schedule(dynamic, 4) reduction(+ : invalid, total_samples) reduction(max : max_fp)
   for (int row = 0; row < n; ++row) {
     std::vector<double> acc(static_cast<std::size_t>(ch));
@@ -66,7 +148,7 @@ Image Rectify(const Image& photo, const PlateToPixel& project, double s, const R
                                 options.max_samples_per_axis);
       std::fill(acc.begin(), acc.end(), 0.0);
       bool inside = true;
-      const bool box = options.area_weighting && lu >= 1 && lv >= 1;
+      const bool box = options.filter == "area" && lu >= 1 && lv >= 1;
       for (int j = 0; j < nv; ++j)
         for (int i = 0; i < nu; ++i) {
           const Vec2 q(-s / 2 + (col + (i + 0.5) / nu) * texel, s / 2 - (row + (j + 0.5) / nv) * texel);
@@ -80,13 +162,15 @@ Image Rectify(const Image& photo, const PlateToPixel& project, double s, const R
             inside &= ix >= 0 && iy >= 0 && ix < photo.width && iy < photo.height;
             const int cx = std::clamp(ix, 0, photo.width - 1), cy = std::clamp(iy, 0, photo.height - 1);
             for (int k = 0; k < ch; ++k) v[k] = photo.at(cx, cy, k);
+          } else if (spline) {
+            inside &= SampleSpline(coeff, px.x(), px.y(), v.data());
           } else {
             inside &= SampleBilinear(photo, px.x(), px.y(), v.data());
           }
           for (int k = 0; k < ch; ++k) acc[k] += v[k];
         }
       const double w = 1.0 / (nu * nv);
-      for (int k = 0; k < ch; ++k) out.at(col, row, k) = static_cast<float>(acc[k] * w);
+      for (int k = 0; k < ch; ++k) out.at(col, row, k) = static_cast<float>(spline ? std::max(0.0, acc[k] * w) : acc[k] * w);
       total_samples += nu * nv;
       if (!inside) ++invalid;
     }

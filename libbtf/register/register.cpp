@@ -644,7 +644,9 @@ class Registration {
     *mask = MarkerMask(board_, g, tex.width);
     r.masked_hidden = static_cast<std::size_t>(std::count(mask->begin(), mask->end(), 1));
     if (merged.clipped_pixels > 0) {  // a texel touching a clipped pixel (every exposure of a bracket) has no value
-      const Image clipped = Rectify(merged.clipped, project, S_, o_.rectify);
+      RectifyOptions mask_options = o_.rectify;  // a 0/1 mask: no spline ringing into the texels around it
+      mask_options.filter = "area";
+      const Image clipped = Rectify(merged.clipped, project, S_, mask_options);
       for (std::size_t i = 0; i < mask->size(); ++i)
         if (clipped.pixels[i] > 0) r.masked_clipped += 1, (*mask)[i] = 1;
     }

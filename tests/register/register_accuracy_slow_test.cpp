@@ -18,6 +18,21 @@ namespace {
 
 using json = nlohmann::json;
 
+// Relative RMS of view v of `reg` against `gt` (light 0), over all texels and over the interior
+// (4 texels = 2.5 mm in from the edge): at 75 deg the 1 mm high markers occlude a strip of up to
+// h tan(75) = 3.7 mm of the sample edge in the photo itself, which no registration can undo.
+std::pair<double, double> RelativeRms(const Dataset& gt, const Dataset& reg, int v) {
+  double e = 0, r = 0, ei = 0, ri = 0;
+  for (int y = 0; y < reg.height(); ++y)
+    for (int x = 0; x < reg.width(); ++x)
+      for (int c = 0; c < reg.channels(); ++c) {
+        const double a = gt.at(v, 0, y, x, c), b = reg.at(v, 0, y, x, c);
+        e += (a - b) * (a - b), r += a * a;
+        if (x >= 4 && y >= 4 && x < reg.width() - 4 && y < reg.height() - 4) ei += (a - b) * (a - b), ri += a * a;
+      }
+  return {std::sqrt(e / r), std::sqrt(ei / ri)};
+}
+
 TEST(RegisterAccuracy, PerElevationUpTo75Degrees) {
   const auto dir = test::TempDir();
   // bonn81 views 0, 1, 9, 25, 45, 70 = 0, 15, 30, 45, 60, 75 deg; markers 1 mm above the cloth,
@@ -27,40 +42,39 @@ TEST(RegisterAccuracy, PerElevationUpTo75Degrees) {
   ASSERT_EQ(test::RunCommand(synth + " photos --quiet --views " + views + " --lights 0 --marker-height 1 --k1 -0.05 -o " +
                              (dir / "ph").string()),
             0);
+  // The truth with 32 x 32 jittered samples per texel: with 8 x 8 the truth itself is 1.5 % off
+  // at 60 and 75 deg (0.2 % at 32 x 32 against 64 x 64; test_register_slow
+  // --gtest_filter=SteepViews.TruthSamplingPoseAndResamplingFilter prints both).
   ASSERT_EQ(test::RunCommand(synth + " btf --quiet --views " + views +
-                             " --lights 0 --resolution 64 --tiles 10 --samples 8 -o " + (dir / "gt.h5").string() +
+                             " --lights 0 --resolution 64 --tiles 10 --samples 32 -o " + (dir / "gt.h5").string() +
                              " 2>/dev/null"),
             0);
-  std::string out;
-  ASSERT_EQ(test::RunCommand(test::Tool("btf-register") + " run --quiet " + (dir / "ph/manifest.json").string() +
-                                 " -o " + (dir / "d.h5").string() + " --resolution 64 --truth " +
-                                 (dir / "ph/truth.json").string() + " --report " + (dir / "r.json").string(),
-                             &out),
-            0)
-      << out;
-  std::ifstream in(dir / "r.json");
+  for (const std::string filter : {"area", "spline"}) {
+    std::string out;
+    ASSERT_EQ(test::RunCommand(test::Tool("btf-register") + " run --quiet " + (dir / "ph/manifest.json").string() +
+                                   " -o " + (dir / ("d-" + filter + ".h5")).string() + " --resolution 64 --filter " +
+                                   filter + " --truth " + (dir / "ph/truth.json").string() + " --report " +
+                                   (dir / ("r-" + filter + ".json")).string(),
+                               &out),
+              0)
+        << out;
+  }
+  std::ifstream in(dir / "r-area.json");
   const json rep = json::parse(in);
-  const Dataset reg = ReadDataset(dir / "d.h5"), gt = ReadDataset(dir / "gt.h5");
-  ASSERT_EQ(reg.size(), gt.size());
-  fmt::print("theta  markers  corner_rms_px  homography_rms_px  homography_max_px  rel_rms_all  rel_rms_interior\n");
-  for (int v = 0; v < reg.num_views(); ++v) {
+  const Dataset area = ReadDataset(dir / "d-area.h5"), spline = ReadDataset(dir / "d-spline.h5"),
+                gt = ReadDataset(dir / "gt.h5");
+  ASSERT_EQ(area.size(), gt.size());
+  ASSERT_EQ(spline.size(), gt.size());
+  fmt::print("theta  markers  corner_rms_px  homography_rms_px  homography_max_px  rel_rms_all  rel_rms_interior  "
+             "spline_all  spline_interior\n");
+  for (int v = 0; v < area.num_views(); ++v) {
     const json& p = rep["photos"][v];
-    const double theta = RadToDeg(reg.views().angles(v).theta);
-    // Relative RMS over all texels, and over the interior (4 texels = 2.5 mm in from the edge): at
-    // 75 deg the 1 mm high markers occlude a strip of up to h tan(75) = 3.7 mm of the sample edge in
-    // the photo itself, which no registration can undo.
-    double e = 0, r = 0, ei = 0, ri = 0;
-    for (int y = 0; y < reg.height(); ++y)
-      for (int x = 0; x < reg.width(); ++x)
-        for (int c = 0; c < reg.channels(); ++c) {
-          const double a = gt.at(v, 0, y, x, c), b = reg.at(v, 0, y, x, c);
-          e += (a - b) * (a - b), r += a * a;
-          if (x >= 4 && y >= 4 && x < reg.width() - 4 && y < reg.height() - 4) ei += (a - b) * (a - b), ri += a * a;
-        }
-    const double rel = std::sqrt(e / r), rel_in = std::sqrt(ei / ri);
+    const double theta = RadToDeg(area.views().angles(v).theta);
+    const auto [rel, rel_in] = RelativeRms(gt, area, v);
+    const auto [rel_s, rel_in_s] = RelativeRms(gt, spline, v);
     const double corner = p["truth_corner_rms_px"], hrms = p["truth_homography_rms_px"], hmax = p["truth_homography_max_px"];
-    fmt::print("{:5.0f}  {:7d}  {:13.3f}  {:17.4f}  {:17.4f}  {:11.4f}  {:16.4f}\n", theta, p["markers_found"].get<int>(),
-               corner, hrms, hmax, rel, rel_in);
+    fmt::print("{:5.0f}  {:7d}  {:13.3f}  {:17.4f}  {:17.4f}  {:11.4f}  {:16.4f}  {:10.4f}  {:15.4f}\n", theta,
+               p["markers_found"].get<int>(), corner, hrms, hmax, rel, rel_in, rel_s, rel_in_s);
     EXPECT_EQ(p["status"], "ok");
     // The occlusion warning fires exactly where the table shows the edge strip (75 deg only).
     EXPECT_EQ(p["warnings"].size(), theta > 70 ? 1u : 0u) << theta << " " << p["warnings"].dump();
@@ -69,9 +83,49 @@ TEST(RegisterAccuracy, PerElevationUpTo75Degrees) {
     // sampling of axis-aligned edges), 0.1 px from 30 to 75 deg.
     EXPECT_LT(hrms, 0.1) << theta;
     EXPECT_LT(corner, theta >= 29 ? 0.1 : 0.2) << theta;
-    // Normtexture vs ground truth: photo blur and the texel box filter leave 2-3.5% up to 60 deg;
-    // at 75 deg the photo resolves a texel with only 1.5 px across: bound 0.15.
-    EXPECT_LT(rel_in, theta < 70 ? 0.05 : 0.15) << theta;
+    // Normtexture vs ground truth (interior). The error left is the photo's sampling of the
+    // foreshortened texel, not the pose (docs/btf-register.md, "Accuracy at steep views"): measured
+    // area 0.012-0.021 up to 60 deg and 0.069 at 75 deg (texel 1.5 px across), spline 0.010-0.015
+    // and 0.061. Bounds: 0.03 up to 60 deg, 0.09 at 75 deg; the spline filter must not be worse than
+    // area weighting anywhere (+0.002 for the run-to-run-free but view-dependent margin).
+    EXPECT_LT(rel_in, theta < 70 ? 0.03 : 0.09) << theta;
+    EXPECT_LT(rel_in_s, theta < 70 ? 0.03 : 0.09) << theta;
+    EXPECT_LT(rel_in_s, rel_in + 0.002) << theta;
+  }
+}
+
+// Issue #13's 2 % at 75 deg, for a camera with 3 x the pixels per mm of the table's (3840 x 2880,
+// 11 megapixels, same 500 mm and field of view): a texel then spans 4.4 px across its
+// foreshortened side instead of 1.5. btf-register run --filter spline against the 32 x 32 truth.
+TEST(RegisterAccuracy, SeventyFiveDegreesWithinTwoPercentAtThreeTimesThePixels) {
+  const auto dir = test::TempDir();
+  const std::string synth = test::Tool("btf-synth");
+  ASSERT_EQ(test::RunCommand(synth + " photos --quiet --views 70 --lights 0 --marker-height 1 --k1 -0.05 --width 3840 "
+                             "--height 2880 -o " + (dir / "ph").string()),
+            0);
+  ASSERT_EQ(test::RunCommand(synth + " btf --quiet --views 70 --lights 0 --resolution 64 --tiles 10 --samples 32 -o " +
+                             (dir / "gt.h5").string() + " 2>/dev/null"),
+            0);
+  const Dataset gt = ReadDataset(dir / "gt.h5");
+  for (const std::string filter : {"area", "spline"}) {
+    std::string out;
+    ASSERT_EQ(test::RunCommand(test::Tool("btf-register") + " run --quiet " + (dir / "ph/manifest.json").string() +
+                                   " -o " + (dir / "d.h5").string() + " --resolution 64 --filter " + filter +
+                                   " --truth " + (dir / "ph/truth.json").string() + " --report " +
+                                   (dir / "r.json").string(),
+                               &out),
+              0)
+        << out;
+    std::ifstream in(dir / "r.json");
+    const json p = json::parse(in)["photos"][0];
+    const auto [rel, rel_in] = RelativeRms(gt, ReadDataset(dir / "d.h5"), 0);
+    const auto masked = p["masked_texels"]["hidden_by_markers"].get<int>();
+    fmt::print("75 deg, 3840 x 2880, filter {}: homography RMS {:.4f} px, rel. RMS all {:.4f}, interior {:.4f}, {} texels "
+               "masked (hidden by markers)\n",
+               filter, p["truth_homography_rms_px"].get<double>(), rel, rel_in, masked);
+    // Measured: spline 0.014 interior (area 0.020, over the 2 %). Bound: the issue's 2 % with spline.
+    if (filter == "spline") EXPECT_LT(rel_in, 0.02);
+    EXPECT_GT(masked, 0);  // the near edge behind the raised markers is masked and counted
   }
 }
 

@@ -295,6 +295,9 @@ int main(int argc, char** argv) {
   cr->add_option("--hdr-dark", ro.hdr.dark, "Brackets: stored value <= this fraction of full scale is dark (left out)");
   cr->add_option("--samples-per-px", ro.rectify.samples_per_px, "Anti-aliasing: samples per photo pixel per axis");
   cr->add_option("--max-samples", ro.rectify.max_samples_per_axis, "Anti-aliasing: cap on samples per texel axis");
+  cr->add_option("--filter", ro.rectify.filter,
+                 "Photo reconstruction: area (nearest pixel where a texel covers >= 1 px) | bilinear | spline "
+                 "(quadratic spline with the pixels' box averages: undoes the pixel integration)");
   cr->add_option("--min-markers", ro.geometry.min_markers, "Fewer usable markers fail the photo");
   cr->add_option("--ransac-px", ro.geometry.ransac_threshold_px, "Outlier threshold for wrong markers, px");
   cr->add_option("--max-rms", ro.geometry.max_rms_px, "Larger reprojection RMS fails the photo, px");
