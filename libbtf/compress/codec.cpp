@@ -97,6 +97,7 @@ void CompressOptions::Check() const {
   BTF_CHECK_OPTION(lpca_memory == "auto" || lpca_memory == "in-core" || lpca_memory == "out-of-core", "lpca_memory",
                    "must be auto, in-core or out-of-core");
   BTF_CHECK_OPTION(gram_limit >= 1, "gram_limit", "must be >= 1");
+  BTF_CHECK_OPTION(lpca_sample >= 1, "lpca_sample", "must be >= 1");
   BTF_CHECK_OPTION(storage == CodecStorage::kFloat || !IsFullMatrixFactorisation(method), "storage",
                    "half storage is for pca-view and lpca codecs (fmf/dfmf factors are stored as float)");
 }
@@ -107,6 +108,7 @@ nlohmann::json CompressOptions::ToJson() const {
           {"retained_energy", retained_energy}, {"seed", seed},
           {"log_transform", log_transform}, {"log_epsilon", log_epsilon},
           {"max_iterations", max_iterations}, {"min_improvement", min_improvement}, {"lpca_memory", lpca_memory},
+          {"lpca_sample", lpca_sample},
           {"gram_limit", gram_limit},       {"storage", StorageName(storage)},
           {"max_bytes", max_bytes},         {"quant_bits", quant_bits},
           {"tensor_growth", tensor_growth}};
@@ -126,6 +128,7 @@ nlohmann::json CompressSummary::ToJson() const {
     j["clusters"] = clusters;
     j["iteration_relative_errors"] = iteration_errors;
     j["iteration_reassigned_texels"] = iteration_changes;
+    j["sample_round_relative_errors"] = sample_errors;
     j["lpca_memory"] = {{"mode", lpca_memory}, {"input_passes", lpca_passes}, {"peak_rss_bytes", peak_rss_bytes}};
   }
   if (method == "lpca-tensor")
@@ -179,6 +182,8 @@ std::string CompressSummary::Report() const {
   r += fmt::format("  PSNR                  {:.2f} dB (peak = {} = {:.6g})\n", psnr_db, psnr_peak_definition, psnr_peak);
   if (method == "lpca" || method == "lpca-tensor")
     r += fmt::format("  iteration errors      {:.5f}\n", fmt::join(iteration_errors, " "));
+  if (!sample_errors.empty())
+    r += fmt::format("  sample round errors   {:.5f}\n", fmt::join(sample_errors, " "));
   if (!lpca_memory.empty())
     r += fmt::format("  lpca memory           {}, {} passes over the input, peak memory {}\n", lpca_memory, lpca_passes,
                      FormatBytes(peak_rss_bytes));

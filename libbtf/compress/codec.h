@@ -94,6 +94,10 @@ struct CompressOptions {
   std::string lpca_memory = "auto";
   // LPCA stops when an iteration improves the relative error by less than this fraction.
   double min_improvement = 1e-3;
+  // LPCA: texels of the k-means sample, max(lpca_sample, clusters), all texels if there are no
+  // more. When the sample is smaller than the texels, local-PCA rounds run on the sample alone
+  // (mini-batch, in memory) before the rounds over all texels.
+  int lpca_sample = 8192;
   // Decomposition choice: Gram matrix of the smaller side (double) when min(n, d) <= this,
   // randomized SVD (c + 10 oversampling, 2 power iterations) otherwise.
   int gram_limit = 1024;
@@ -114,6 +118,9 @@ struct CompressSummary {
   int clusters = 0;                    // lpca
   std::vector<double> iteration_errors;  // lpca: relative error after each PCA/reassignment round
   std::vector<int> iteration_changes;    // lpca: texels that changed cluster in each round
+  // lpca: the sample's relative error after each mini-batch round on it (the first: Lloyd's
+  // clusters); empty when the sample is all texels.
+  std::vector<double> sample_errors;
   std::string lpca_memory;               // lpca: "in-core" or "out-of-core" (the mode used)
   int lpca_passes = 0;                   // lpca: passes over the input's view slots
   std::uint64_t peak_rss_bytes = 0;      // lpca: the process's peak resident memory after compressing

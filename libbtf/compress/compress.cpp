@@ -333,8 +333,56 @@ void CompressPcaView(const SlotSource& in, const CompressOptions& o, const Trans
 // of per-cluster PCA and reassignment of every texel to the cluster that reconstructs it best.
 struct ClusterFit {
   std::vector<PcaResult> pca;           // per cluster
-  std::vector<std::int32_t> assign;     // per texel
+  std::vector<std::int32_t> assign;     // per texel (sample rounds: per sample texel)
   double error = 0;                     // relative error (transformed domain)
+  std::vector<std::vector<std::size_t>> members;  // per cluster, in order (the rows each PCA was fitted on)
+};
+
+// The reassignment's model: one GEMM row per cluster mean, then c rows per cluster basis (zero
+// where a cluster has fewer components); the mean norms and mean-basis products in double.
+struct ReassignModel {
+  int K = 0, c = 0;
+  RowMatrixXf big;
+  Eigen::VectorXd mnorm;
+  Eigen::MatrixXd me;
+  std::vector<int> ck;  // components per cluster, -1 for a cluster still empty
+
+  ReassignModel(const std::vector<PcaResult>& pca, int components, std::size_t d)
+      : K(static_cast<int>(pca.size())), c(components) {
+    big = RowMatrixXf::Zero(Eigen::Index(K) * (c + 1), static_cast<Eigen::Index>(d));
+    mnorm = Eigen::VectorXd::Zero(K);
+    ck.assign(static_cast<std::size_t>(K), -1);
+    for (int k = 0; k < K; ++k) {
+      const PcaResult& p = pca[static_cast<std::size_t>(k)];
+      if (p.mean.size() == 0) continue;  // still empty
+      ck[static_cast<std::size_t>(k)] = p.components();
+      big.row(k) = p.mean.transpose();
+      mnorm[k] = p.mean.cast<double>().squaredNorm();
+      for (int j = 0; j < p.components(); ++j) big.row(K + Eigen::Index(k) * c + j) = p.basis.row(j);
+    }
+    // m_k . e_kj
+    me = Eigen::MatrixXd::Zero(K, std::max(c, 1));
+    for (int k = 0; k < K; ++k)
+      for (int j = 0; j < std::max(ck[static_cast<std::size_t>(k)], 0); ++j)
+        me(k, j) = big.row(k).cast<double>().dot(big.row(K + Eigen::Index(k) * c + j).cast<double>());
+  }
+
+  // Row i of P (= a texel's row times big^T; norm: its squared norm): the cluster that
+  // reconstructs it best (the lowest index on ties; `arg` if none is fitted), its squared residual.
+  int Best(const Eigen::MatrixXf& P, Eigen::Index i, double norm, int arg, double* residual) const {
+    double best = std::numeric_limits<double>::infinity();
+    for (int k = 0; k < K; ++k) {
+      if (ck[static_cast<std::size_t>(k)] < 0) continue;
+      double r = norm - 2.0 * P(i, k) + mnorm[k];
+      for (int j = 0; j < ck[static_cast<std::size_t>(k)]; ++j) {
+        const double proj = double(P(i, K + Eigen::Index(k) * c + j)) - me(k, j);
+        r -= proj * proj;
+      }
+      if (r < best) best = r, arg = k;
+    }
+    *residual = std::max(best, 0.0);
+    return arg;
+  }
 };
 
 // Distributed (docs/scaling.md): rank r owns a contiguous range of whole kRows texel blocks and
@@ -395,7 +443,6 @@ class LpcaCompressor {
 
  private:
   static constexpr std::size_t kRows = 256;      // texels per GEMM block (assignment, reassignment)
-  static constexpr std::size_t kSample = 8192;   // texels of the k-means sample
   static constexpr int kLloydRounds = 100;       // k-means rounds at most
   static constexpr double kLloydTolerance = 1e-5;  // stop when the objective improves by less (relative)
 
@@ -515,13 +562,14 @@ class LpcaCompressor {
     });
   }
 
-  // Deterministic sample of at most kSample texels (sorted), drawn with the seed.
+  // Deterministic sample of max(lpca_sample, K) texels (sorted; all texels if fewer), drawn with the seed.
   std::vector<std::size_t> Sample(std::mt19937_64& rng) const {
     std::vector<std::size_t> sample(N_);
     std::iota(sample.begin(), sample.end(), std::size_t(0));
-    if (N_ > kSample) {
+    const std::size_t size = std::max<std::size_t>(std::size_t(o_.lpca_sample), std::size_t(K_));
+    if (N_ > size) {
       std::shuffle(sample.begin(), sample.end(), rng);
-      sample.resize(kSample);
+      sample.resize(size);
       std::sort(sample.begin(), sample.end());
     }
     return sample;
@@ -564,8 +612,10 @@ class LpcaCompressor {
 
   // k-means on a sample: k-means++ seeds, then Lloyd rounds (means in double, summed in sample
   // order) until no sample texel moves, the k-means objective improves by less than
-  // kLloydTolerance (relative) or kLloydRounds; every texel then goes to its nearest center, and
-  // the first per-cluster PCA is fitted.
+  // kLloydTolerance (relative) or kLloydRounds. If the sample is smaller than the texels, local-PCA
+  // rounds on the sample alone follow (SampleRounds) and every texel goes to the cluster whose
+  // sample model reconstructs it best; otherwise every texel goes to its nearest center. Then the
+  // first per-cluster PCA of all texels is fitted.
   ClusterFit InitialClustering() {
     K_ = o_.clusters;
     if (std::size_t(K_) > N_) {
@@ -575,10 +625,18 @@ class LpcaCompressor {
     std::mt19937_64 rng(o_.seed);
     const std::vector<std::size_t> sample = Sample(rng);
     const std::size_t S = sample.size();
+    const bool mini_batch = S < N_;
     RowMatrixXf centers(K_, static_cast<Eigen::Index>(d_));
     int rounds = 0;
+    std::vector<PcaResult> models;  // mini-batch: the sample rounds' per-cluster models (no scores)
+    std::vector<double> sample_errors;
+    auto on_sample = [&](const RowMatrixXf& M, const double* norms, const std::vector<std::size_t>& rows) {
+      std::vector<std::int32_t> assign;
+      rounds = Lloyd(M, norms, rows, rng, centers, assign);
+      if (mini_batch) models = SampleRounds(M, norms, rows, std::move(assign), sample_errors);
+    };
     if (R_ == 1 && !ooc_) {
-      rounds = Lloyd(A_, norms_.data(), sample, rng, centers);
+      on_sample(A_, norms_.data(), sample);
     } else {  // the sample's rows gathered (by rank 0, or in one pass out of core): the same Lloyd
       const RowMatrixXf rows = ooc_ ? ReadSampleRows(sample) : GatherSampleRows(sample);
       if (rank_ == 0) {
@@ -586,29 +644,160 @@ class LpcaCompressor {
         std::iota(index.begin(), index.end(), std::size_t(0));
         std::vector<double> norms(S);
         for (std::size_t i = 0; i < S; ++i) norms[i] = norms_[static_cast<Eigen::Index>(sample[i])];
-        rounds = Lloyd(rows, norms.data(), index, rng, centers);
+        on_sample(rows, norms.data(), index);
       }
       dist::Broadcast(0, centers.data(), std::size_t(centers.size()) * sizeof(float));
       dist::Broadcast(0, &rounds, sizeof rounds);
+      if (mini_batch && R_ > 1) {  // every rank reassigns its texels with the sample models
+        models.resize(static_cast<std::size_t>(K_));
+        for (int k = 0; k < K_; ++k) {
+          auto bytes = dist::BroadcastBytes(0, rank_ == 0 ? PackPca(models[std::size_t(k)]) : std::vector<std::uint8_t>());
+          if (rank_ != 0) models[std::size_t(k)] = UnpackPca(bytes);
+        }
+        dist::Packer pe;
+        pe.PutVector(sample_errors);
+        sample_errors = dist::Unpacker(dist::BroadcastBytes(0, rank_ == 0 ? std::move(pe.bytes) : std::vector<std::uint8_t>()))
+                            .GetVector<double>();
+      }
     }
     ClusterFit fit;
-    std::vector<std::int32_t> mine(ooc_ ? N_ : local());
-    ForChunks([&] { NearestCenters(A_, nullptr, centers, nullptr, local(), mine.data() + (ooc_ ? t0_ : 0), nullptr); });
-    fit.assign = R_ > 1 ? dist::AllGatherConcat(mine) : std::move(mine);
+    if (mini_batch) {
+      fit.assign.assign(N_, 0);
+      Reassign(models, fit.assign);
+    } else {
+      std::vector<std::int32_t> mine(ooc_ ? N_ : local());
+      ForChunks([&] { NearestCenters(A_, nullptr, centers, nullptr, local(), mine.data() + (ooc_ ? t0_ : 0), nullptr); });
+      fit.assign = R_ > 1 ? dist::AllGatherConcat(mine) : std::move(mine);
+    }
     BTF_CHECK(fit.assign.size() == N_);
-    FitClusters(fit, false);
+    FitClusters(fit, mini_batch);
+    sum_.sample_errors = sample_errors;
     sum_.iteration_errors.push_back(fit.error);
     sum_.iteration_changes.push_back(0);
-    rep_.Info("lpca: k-means on {} texels ({} Lloyd rounds), relative error {:.5f}", S, rounds, fit.error);
+    rep_.Info("lpca: k-means on {} texels ({} Lloyd rounds){}, relative error {:.5f}", S, rounds,
+              mini_batch ? fmt::format(", {} local-PCA rounds on them (error {:.5f} there)", sample_errors.size() - 1,
+                                       sample_errors.empty() ? 0.0 : sample_errors.back())
+                         : std::string(),
+              fit.error);
     return fit;
   }
 
+  // Mini-batch local-PCA rounds on the sample (rows `rows` of M, norms of M's rows), from Lloyd's
+  // assignment `assign` of the sample texels: per-cluster PCA of the sample members, then every
+  // sample texel to the cluster that reconstructs it best, until nothing moves, a round improves
+  // the sample's relative error by less than min_improvement or max_iterations rounds. errors:
+  // the sample's relative error after each fit (the first from Lloyd's clusters). Returns the
+  // best fit's models (mean and basis; the scores are dropped).
+  std::vector<PcaResult> SampleRounds(const RowMatrixXf& M, const double* norms, const std::vector<std::size_t>& rows,
+                                      std::vector<std::int32_t> assign, std::vector<double>& errors) const {
+    double energy = 0;
+    for (std::size_t t : rows) energy += norms[t];
+    std::vector<double> residual;
+    ClusterFit fit{{}, std::move(assign), 0, {}};
+    FitSample(M, rows, energy, residual, fit, nullptr);
+    errors.push_back(fit.error);
+    for (int it = 0; it < o_.max_iterations; ++it) {
+      ClusterFit next{{}, fit.assign, 0, {}};
+      if (ReassignSample(M, norms, rows, fit.pca, next.assign, residual) == 0) break;
+      FitSample(M, rows, energy, residual, next, &fit);
+      errors.push_back(next.error);
+      const bool better = next.error < fit.error;
+      const bool enough = fit.error - next.error >= o_.min_improvement * fit.error;
+      if (better) fit = std::move(next);
+      if (!enough) break;
+    }
+    return std::move(fit.pca);
+  }
+
+  // FitClusters on the sample (f.assign: per sample texel, members: sample positions); residual:
+  // per sample texel after the last reassignment, empty before the first (then empty clusters
+  // take the first sample texels of clusters that can spare one).
+  void FitSample(const RowMatrixXf& M, const std::vector<std::size_t>& rows, double energy,
+                 const std::vector<double>& residual, ClusterFit& f, const ClusterFit* prev) const {
+    const std::size_t S = rows.size();
+    std::vector<std::vector<std::size_t>> members(static_cast<std::size_t>(K_));
+    for (std::size_t i = 0; i < S; ++i) members[static_cast<std::size_t>(f.assign[i])].push_back(i);
+    std::vector<std::size_t> order;
+    std::size_t next_worst = 0;
+    for (int k = 0; k < K_; ++k) {
+      if (!members[static_cast<std::size_t>(k)].empty()) continue;
+      if (order.empty()) {
+        order.resize(S);
+        std::iota(order.begin(), order.end(), std::size_t(0));
+        if (!residual.empty())
+          std::stable_sort(order.begin(), order.end(), [&](auto a, auto b) { return residual[a] > residual[b]; });
+      }
+      while (next_worst < S && members[static_cast<std::size_t>(f.assign[order[next_worst]])].size() <= 1) ++next_worst;
+      if (next_worst == S) break;
+      const std::size_t i = order[next_worst++];
+      auto& from = members[static_cast<std::size_t>(f.assign[i])];
+      from.erase(std::find(from.begin(), from.end(), i));
+      f.assign[i] = k;
+      auto& to = members[static_cast<std::size_t>(k)];
+      to.insert(std::lower_bound(to.begin(), to.end(), i), i);
+    }
+    f.pca.assign(static_cast<std::size_t>(K_), PcaResult{});
+    std::vector<int> order_k;  // to fit, largest first; the others keep prev's PCA
+    for (int k = 0; k < K_; ++k) {
+      const auto& m = members[static_cast<std::size_t>(k)];
+      if (m.empty()) continue;
+      if (prev && prev->members[static_cast<std::size_t>(k)] == m)
+        f.pca[static_cast<std::size_t>(k)] = prev->pca[static_cast<std::size_t>(k)];
+      else
+        order_k.push_back(k);
+    }
+    std::stable_sort(order_k.begin(), order_k.end(), [&](int a, int b) {
+      return members[static_cast<std::size_t>(a)].size() > members[static_cast<std::size_t>(b)].size();
+    });
+#pragma omp parallel for schedule(dynamic, 1)
+    for (std::ptrdiff_t kk = 0; kk < std::ptrdiff_t(order_k.size()); ++kk) {
+      omp_set_num_threads(1);  // Eigen sequential in this cluster's task
+      const int k = order_k[static_cast<std::size_t>(kk)];
+      const auto& m = members[static_cast<std::size_t>(k)];
+      RowMatrixXf x(static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d_));
+      for (std::size_t i = 0; i < m.size(); ++i) x.row(Eigen::Index(i)) = M.row(static_cast<Eigen::Index>(rows[m[i]]));
+      PcaResult p = Pca(x, MakeRequest(o_, std::uint64_t(k)));
+      p.scores.resize(0, 0);
+      f.pca[static_cast<std::size_t>(k)] = std::move(p);
+    }
+    double res = 0;
+    for (const PcaResult& p : f.pca) res += p.residual_energy;
+    f.error = energy > 0 ? std::sqrt(res / energy) : 0;
+    f.members = std::move(members);
+  }
+
+  // Reassign on the sample: each sample texel (rows `rows` of M) to the cluster whose model
+  // reconstructs it best, in static blocks of kRows gathered rows; returns the number moved.
+  std::size_t ReassignSample(const RowMatrixXf& M, const double* norms, const std::vector<std::size_t>& rows,
+                             const std::vector<PcaResult>& pca, std::vector<std::int32_t>& assign,
+                             std::vector<double>& residual) const {
+    const ReassignModel model(pca, o_.components, d_);
+    const std::size_t S = rows.size();
+    residual.resize(S);
+    std::vector<std::uint8_t> changed(S, 0);
+    ForBlocks(S, [&](std::size_t first, std::size_t count) {
+      const Eigen::Index w = static_cast<Eigen::Index>(count);
+      RowMatrixXf X(w, M.cols());
+      for (Eigen::Index i = 0; i < w; ++i) X.row(i) = M.row(static_cast<Eigen::Index>(rows[first + std::size_t(i)]));
+      const Eigen::MatrixXf P = X * model.big.transpose();
+      for (Eigen::Index i = 0; i < w; ++i) {
+        const std::size_t s = first + std::size_t(i);
+        const int arg = model.Best(P, i, norms[rows[s]], assign[s], &residual[s]);
+        changed[s] = arg != assign[s];
+        assign[s] = arg;
+      }
+    });
+    return std::accumulate(changed.begin(), changed.end(), std::size_t(0));
+  }
+
   // Seeds and Lloyd rounds on the rows `sample` of M (norms: of M's rows); returns the rounds.
+  // assign: the sample texels' nearest centers.
   int Lloyd(const RowMatrixXf& M, const double* norms, const std::vector<std::size_t>& sample, std::mt19937_64& rng,
-            RowMatrixXf& centers) const {
+            RowMatrixXf& centers, std::vector<std::int32_t>& assign) const {
     centers = SeedCenters(M, sample, rng);
     const std::size_t S = sample.size();
-    std::vector<std::int32_t> assign(S, -1), next(S);
+    std::vector<std::int32_t> next(S);
+    assign.assign(S, -1);
     std::vector<double> dist(S);
     double objective = std::numeric_limits<double>::infinity();
     int rounds = 0;
@@ -655,7 +844,9 @@ class LpcaCompressor {
 #pragma omp parallel for schedule(static)
     for (std::ptrdiff_t ch = 0; ch < chunks; ++ch) {
       const Eigen::Index c0 = ch * kCols, w = std::min(kCols, d - c0);
-      Eigen::MatrixXd sums = Eigen::MatrixXd::Zero(K_, w);
+      // Row-major: a texel's values are added to one contiguous row of sums.
+      Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> sums =
+          Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>::Zero(K_, w);
       for (std::size_t i = 0; i < S; ++i)
         sums.row(assign[i]) += M.row(static_cast<Eigen::Index>(sample[i])).segment(c0, w).cast<double>();
       for (int k = 0; k < K_; ++k)
@@ -673,7 +864,7 @@ class LpcaCompressor {
       centers.row(k) = M.row(static_cast<Eigen::Index>(pick));
 #pragma omp parallel for schedule(static)
       for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(sample.size()); ++i)
-        dist[i] = std::min(dist[i], (M.row(static_cast<Eigen::Index>(sample[i])) - centers.row(k)).cast<double>().squaredNorm());
+        dist[i] = std::min(dist[i], double((M.row(static_cast<Eigen::Index>(sample[i])) - centers.row(k)).squaredNorm()));
       const double s = std::accumulate(dist.begin(), dist.end(), 0.0);
       if (!(s > 0)) {  // fewer distinct ABRDFs than clusters: duplicate centers (clusters stay empty, re-seeded)
         pick = sample[std::size_t(k + 1) % sample.size()];
@@ -723,8 +914,10 @@ class LpcaCompressor {
     return p;
   }
 
-  // Per-cluster PCA on the current assignment; empty clusters re-seeded from the worst texels.
-  void FitClusters(ClusterFit& f, bool have_residuals) {
+  // Per-cluster PCA on the current assignment; empty clusters re-seeded from the worst texels. A
+  // cluster whose members are those it had in `prev` keeps prev's PCA (the same rows in the same
+  // order with the same seed: the PCA it would compute again).
+  void FitClusters(ClusterFit& f, bool have_residuals, const ClusterFit* prev = nullptr) {
     std::vector<std::vector<std::size_t>> members(static_cast<std::size_t>(K_));
     for (std::size_t i = 0; i < N_; ++i) members[static_cast<std::size_t>(f.assign[i])].push_back(i);
     std::vector<std::size_t> order;
@@ -747,9 +940,16 @@ class LpcaCompressor {
       members[static_cast<std::size_t>(k)].push_back(i);
     }
     f.pca.assign(static_cast<std::size_t>(K_), PcaResult{});
-    // Largest first (one cluster per thread, Eigen single-threaded inside the region).
-    std::vector<int> order_k(static_cast<std::size_t>(K_));
-    std::iota(order_k.begin(), order_k.end(), 0);
+    // Largest first (one cluster per thread, Eigen single-threaded inside the region); the
+    // clusters that keep prev's PCA are left out.
+    std::vector<int> order_k;
+    for (int k = 0; k < K_; ++k) {
+      const auto& m = members[static_cast<std::size_t>(k)];
+      if (prev && !m.empty() && prev->members.size() == members.size() && prev->members[static_cast<std::size_t>(k)] == m)
+        f.pca[static_cast<std::size_t>(k)] = prev->pca[static_cast<std::size_t>(k)];
+      else
+        order_k.push_back(k);
+    }
     std::stable_sort(order_k.begin(), order_k.end(), [&](int a, int b) {
       return members[static_cast<std::size_t>(a)].size() > members[static_cast<std::size_t>(b)].size();
     });
@@ -844,7 +1044,7 @@ class LpcaCompressor {
       }
     }
     if (R_ > 1)  // every rank gets every cluster's model (and scores, for the codec)
-      for (int k = 0; k < K_; ++k) {
+      for (int k : order_k) {
         if (members[static_cast<std::size_t>(k)].empty()) continue;
         const int o = owner[static_cast<std::size_t>(k)];
         auto bytes = dist::BroadcastBytes(o, rank_ == o ? PackPca(f.pca[static_cast<std::size_t>(k)])
@@ -854,6 +1054,7 @@ class LpcaCompressor {
     double res = 0;
     for (const PcaResult& p : f.pca) res += p.residual_energy;
     f.error = total_ > 0 ? std::sqrt(res / total_) : 0;
+    f.members = std::move(members);
   }
 
   // Out of core: X[k] = the member rows (texel order) of clusters list[first, last), one pass.
@@ -877,43 +1078,15 @@ class LpcaCompressor {
   }
 
   // Reassigns each texel to the cluster that reconstructs it best; returns the number moved.
-  std::size_t Reassign(const ClusterFit& f, std::vector<std::int32_t>& assign) {
-    const int c = o_.components, K = K_;
-    RowMatrixXf big = RowMatrixXf::Zero(Eigen::Index(K) * (c + 1), static_cast<Eigen::Index>(d_));
-    Eigen::VectorXd mnorm = Eigen::VectorXd::Zero(K);
-    std::vector<int> ck(static_cast<std::size_t>(K), -1);
-    for (int k = 0; k < K; ++k) {
-      const PcaResult& p = f.pca[static_cast<std::size_t>(k)];
-      if (p.mean.size() == 0) continue;  // still empty
-      ck[static_cast<std::size_t>(k)] = p.components();
-      big.row(k) = p.mean.transpose();
-      mnorm[k] = p.mean.cast<double>().squaredNorm();
-      for (int j = 0; j < p.components(); ++j) big.row(K + Eigen::Index(k) * c + j) = p.basis.row(j);
-    }
-    // m_k . e_kj
-    Eigen::MatrixXd me(K, std::max(c, 1));
-    me.setZero();
-    for (int k = 0; k < K; ++k)
-      for (int j = 0; j < std::max(ck[static_cast<std::size_t>(k)], 0); ++j)
-        me(k, j) = big.row(k).cast<double>().dot(big.row(K + Eigen::Index(k) * c + j).cast<double>());
+  std::size_t Reassign(const std::vector<PcaResult>& pca, std::vector<std::int32_t>& assign) {
+    const ReassignModel model(pca, o_.components, d_);
     std::vector<std::uint8_t> changed(N_, 0);
     ForChunks([&] { ForBlocks(local(), [&](std::size_t b, std::size_t count) {
       const Eigen::Index w = static_cast<Eigen::Index>(count);
-      const Eigen::MatrixXf P = A_.middleRows(static_cast<Eigen::Index>(b), w) * big.transpose();
+      const Eigen::MatrixXf P = A_.middleRows(static_cast<Eigen::Index>(b), w) * model.big.transpose();
       for (Eigen::Index i = 0; i < w; ++i) {
         const std::size_t ti = t0_ + b + static_cast<std::size_t>(i);
-        double best = std::numeric_limits<double>::infinity();
-        int arg = assign[ti];
-        for (int k = 0; k < K; ++k) {
-          if (ck[static_cast<std::size_t>(k)] < 0) continue;
-          double r = norms_[Eigen::Index(ti)] - 2.0 * P(i, k) + mnorm[k];
-          for (int j = 0; j < ck[static_cast<std::size_t>(k)]; ++j) {
-            const double proj = double(P(i, K + Eigen::Index(k) * c + j)) - me(k, j);
-            r -= proj * proj;
-          }
-          if (r < best) best = r, arg = k;
-        }
-        residual_[ti] = std::max(best, 0.0);
+        const int arg = model.Best(P, i, norms_[Eigen::Index(ti)], assign[ti], &residual_[ti]);
         changed[ti] = arg != assign[ti];
         assign[ti] = arg;
       }
@@ -939,10 +1112,10 @@ class LpcaCompressor {
   void Iterate(ClusterFit& fit) {
     for (int it = 0; it < o_.max_iterations; ++it) {
       rep_.Progress(std::size_t(it), std::size_t(o_.max_iterations), "lpca");
-      ClusterFit next{{}, fit.assign, 0};
-      const std::size_t moved = Reassign(fit, next.assign);
+      ClusterFit next{{}, fit.assign, 0, {}};
+      const std::size_t moved = Reassign(fit.pca, next.assign);
       if (moved == 0) break;
-      FitClusters(next, true);
+      FitClusters(next, true, &fit);
       sum_.iteration_errors.push_back(next.error);
       sum_.iteration_changes.push_back(static_cast<int>(moved));
       rep_.Info("lpca: iteration {}: {} texels reassigned, relative error {:.5f}", it + 1, moved, next.error);

@@ -160,6 +160,16 @@ TEST(Determinism, OneAndTwoThreadsGiveIdenticalCodecs) {
   EXPECT_EQ(s1.iteration_errors, s2.iteration_errors);
   EXPECT_EQ(s1.relative_error, s2.relative_error);
   EXPECT_GE(s1.iteration_errors.size(), 2u) << s1.ToJson().dump();
+  EXPECT_TRUE(s1.sample_errors.empty());  // 576 texels, all in the default 8192-texel sample
+  // Mini-batch local-PCA rounds on a 300-texel sample (two blocks of 256, the second partial),
+  // then rounds over all texels.
+  o.lpca_sample = 300;
+  const Codec c1 = CompressWithThreads(cl, o, 1, &s1), c2 = CompressWithThreads(cl, o, 2, &s2);
+  ExpectSameCoefficients(c1, c2);
+  EXPECT_EQ(s1.sample_errors, s2.sample_errors);
+  EXPECT_EQ(s1.iteration_errors, s2.iteration_errors);
+  EXPECT_EQ(s1.relative_error, s2.relative_error);
+  EXPECT_GE(s1.sample_errors.size(), 2u) << s1.ToJson().dump();
 }
 
 TEST(HalfStorage, HalvesTheFloatArraysWithinTheRoundingBound) {

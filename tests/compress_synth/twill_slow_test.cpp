@@ -218,6 +218,16 @@ TEST(TwillDoneWhen, Lpca32x8IsNoWorseThanConvergedLloydPlusLocalPca) {
   // Ours is a float codec measured after decoding, the reference exact double arithmetic: the
   // float rounding of a ~1 value is ~1e-7 relative, far below 1e-4; so "no worse" within 1e-4.
   EXPECT_LE(s.relative_error, reference + 1e-4);
+  // The same with mini-batch local-PCA rounds on a 2048-texel sample (half the texels) before
+  // the rounds over all texels (--lpca-sample 2048); the same bound.
+  o.lpca_sample = 2048;
+  CompressSummary m;
+  test::CompressDataset(d, o, &m);
+  RecordProperty("lpca_sample_2048_relative_error", std::to_string(m.relative_error));
+  std::printf("lpca k 32 c 8, --lpca-sample 2048: %.6f after %zu sample rounds and %zu full fits\n", m.relative_error,
+              m.sample_errors.size(), m.iteration_errors.size());
+  EXPECT_GE(m.sample_errors.size(), 2u);
+  EXPECT_LE(m.relative_error, reference + 1e-4);
 }
 
 }  // namespace
