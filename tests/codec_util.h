@@ -5,12 +5,39 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <string>
 #include <vector>
 
 #include "libbtf/compress/codec.h"
 #include "libbtf/io/slot_source.h"
 
 namespace btf::test {
+
+// The stored arrays of two codecs are equal bit for bit (files also hold provenance and run
+// times, so their bytes are not compared). `what` names the comparison in failures.
+inline void ExpectSameCodec(const Codec& a, const Codec& b, const std::string& what = "") {
+  ASSERT_EQ(a.method(), b.method()) << what;
+  ASSERT_EQ(a.pca_view().size(), b.pca_view().size()) << what;
+  for (std::size_t v = 0; v < a.pca_view().size(); ++v) {
+    const PcaViewSlot &x = a.pca_view()[v], &y = b.pca_view()[v];
+    EXPECT_EQ(x.components, y.components) << what << " slot " << v;
+    EXPECT_TRUE(x.mean == y.mean && x.basis == y.basis && x.weights == y.weights && x.eigenvalues == y.eigenvalues)
+        << what << " slot " << v;
+  }
+  const LpcaModel &x = a.lpca(), &y = b.lpca();
+  EXPECT_EQ(x.clusters, y.clusters) << what;
+  EXPECT_EQ(x.components, y.components) << what;
+  EXPECT_TRUE(x.cluster_of == y.cluster_of) << what;
+  EXPECT_TRUE(x.cluster_components == y.cluster_components) << what;
+  EXPECT_TRUE(x.means == y.means && x.basis == y.basis && x.weights == y.weights) << what;
+  const FmfModel &f = a.fmf(), &g = b.fmf();
+  ASSERT_EQ(f.matrices.size(), g.matrices.size()) << what;
+  for (std::size_t m = 0; m < f.matrices.size(); ++m) {
+    const FmfMatrix &p = f.matrices[m], &q = g.matrices[m];
+    EXPECT_EQ(p.components, q.components) << what << " matrix " << m;
+    EXPECT_TRUE(p.singular_values == q.singular_values && p.u == q.u && p.sxv == q.sxv) << what << " matrix " << m;
+  }
+}
 
 // max |a - b| / max |a| over every value of two view-slot sources.
 inline double MaxRelativeError(const SlotSource& a, const SlotSource& b) {

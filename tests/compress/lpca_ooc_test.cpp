@@ -40,17 +40,6 @@ CompressOptions Lpca(int k, const std::string& memory) {
   return o;
 }
 
-void ExpectSameCodec(const Codec& a, const Codec& b) {
-  const LpcaModel &x = a.lpca(), &y = b.lpca();
-  EXPECT_EQ(x.clusters, y.clusters);
-  EXPECT_EQ(x.components, y.components);
-  EXPECT_EQ(x.cluster_components, y.cluster_components);
-  EXPECT_EQ(x.cluster_of, y.cluster_of);
-  EXPECT_EQ(x.means, y.means);
-  EXPECT_EQ(x.basis, y.basis);
-  EXPECT_EQ(x.weights, y.weights);
-}
-
 TEST(LpcaOutOfCore, EqualsInCoreAndRecoversTheGroundTruth) {
   const Dataset d = Input();
   CompressSummary in, out;
@@ -62,7 +51,7 @@ TEST(LpcaOutOfCore, EqualsInCoreAndRecoversTheGroundTruth) {
   }
   EXPECT_EQ(in.lpca_memory, "in-core");
   EXPECT_EQ(out.lpca_memory, "out-of-core");
-  ExpectSameCodec(a, b);
+  test::ExpectSameCodec(a, b);
   EXPECT_EQ(in.iteration_errors, out.iteration_errors);
   EXPECT_EQ(in.relative_error, out.relative_error);
   // 4 rank-2 materials, 8 clusters of 3 components: exact up to float rounding (relative 1e-5
@@ -117,7 +106,7 @@ TEST(LpcaOutOfCore, StreamsABonnBtfFile) {
     out = Compress(Lpca(8, "auto"), *src, &b);
   }
   EXPECT_EQ(out.lpca_memory, "out-of-core");
-  ExpectSameCodec(a, b);
+  test::ExpectSameCodec(a, b);
   EXPECT_LT(out.relative_error, 1e-4);  // FMF's float SVD of the input adds rounding (bonn_fmf_test: 1e-4)
 }
 

@@ -113,25 +113,6 @@ TEST(SignConvention, BothMethodsStoreTheLargestEntryOfEachComponentPositive) {
                          b.abrdf_size());
 }
 
-// Every coefficient array, bit for bit (the file adds only metadata and timings).
-void ExpectSameCoefficients(const Codec& a, const Codec& b) {
-  ASSERT_EQ(a.pca_view().size(), b.pca_view().size());
-  for (std::size_t v = 0; v < a.pca_view().size(); ++v) {
-    const PcaViewSlot &x = a.pca_view()[v], &y = b.pca_view()[v];
-    EXPECT_EQ(x.components, y.components) << v;
-    EXPECT_EQ(x.mean, y.mean) << v;
-    EXPECT_EQ(x.basis, y.basis) << v;
-    EXPECT_EQ(x.weights, y.weights) << v;
-    EXPECT_EQ(x.eigenvalues, y.eigenvalues) << v;
-  }
-  const LpcaModel &x = a.lpca(), &y = b.lpca();
-  EXPECT_EQ(x.means, y.means);
-  EXPECT_EQ(x.basis, y.basis);
-  EXPECT_EQ(x.weights, y.weights);
-  EXPECT_EQ(x.cluster_of, y.cluster_of);
-  EXPECT_EQ(x.cluster_components, y.cluster_components);
-}
-
 Codec CompressWithThreads(const Dataset& d, const CompressOptions& o, int threads, CompressSummary* s) {
   const int before = omp_get_max_threads();
   omp_set_num_threads(threads);
@@ -148,7 +129,7 @@ TEST(Determinism, OneAndTwoThreadsGiveIdenticalCodecs) {
   o.components = 4;
   CompressSummary s1, s2;
   const Codec a1 = CompressWithThreads(pv, o, 1, &s1), a2 = CompressWithThreads(pv, o, 2, &s2);
-  ExpectSameCoefficients(a1, a2);
+  test::ExpectSameCodec(a1, a2);
   EXPECT_EQ(s1.relative_error, s2.relative_error);
   // Texels without a clear clustering, so the local-PCA rounds move texels.
   const Dataset cl = test::PerViewLowRank(test::BonnSubset(4), test::BonnSubset(5), 24, 24, 6, 0.05);
@@ -156,7 +137,7 @@ TEST(Determinism, OneAndTwoThreadsGiveIdenticalCodecs) {
   o.clusters = 5;
   o.components = 2;
   const Codec b1 = CompressWithThreads(cl, o, 1, &s1), b2 = CompressWithThreads(cl, o, 2, &s2);
-  ExpectSameCoefficients(b1, b2);
+  test::ExpectSameCodec(b1, b2);
   EXPECT_EQ(s1.iteration_errors, s2.iteration_errors);
   EXPECT_EQ(s1.relative_error, s2.relative_error);
   EXPECT_GE(s1.iteration_errors.size(), 2u) << s1.ToJson().dump();
@@ -165,7 +146,7 @@ TEST(Determinism, OneAndTwoThreadsGiveIdenticalCodecs) {
   // then rounds over all texels.
   o.lpca_sample = 300;
   const Codec c1 = CompressWithThreads(cl, o, 1, &s1), c2 = CompressWithThreads(cl, o, 2, &s2);
-  ExpectSameCoefficients(c1, c2);
+  test::ExpectSameCodec(c1, c2);
   EXPECT_EQ(s1.sample_errors, s2.sample_errors);
   EXPECT_EQ(s1.iteration_errors, s2.iteration_errors);
   EXPECT_EQ(s1.relative_error, s2.relative_error);

@@ -17,6 +17,7 @@
 
 #include "libbtf/compress/codec.h"
 #include "libbtf/io/dataset_io.h"
+#include "tests/codec_util.h"
 #include "tests/test_util.h"
 
 namespace btf {
@@ -116,32 +117,6 @@ TEST(Distributed, CompareFiguresAreIdenticalForOneToFourRanks) {
   }
 }
 
-// The stored arrays of two codecs are equal (the files' provenance holds run times, so the
-// files' bytes are not compared).
-void ExpectSameCodec(const Codec& a, const Codec& b, const std::string& what) {
-  ASSERT_EQ(a.method(), b.method()) << what;
-  ASSERT_EQ(a.pca_view().size(), b.pca_view().size()) << what;
-  for (std::size_t v = 0; v < a.pca_view().size(); ++v) {
-    const PcaViewSlot &x = a.pca_view()[v], &y = b.pca_view()[v];
-    EXPECT_EQ(x.components, y.components) << what << " slot " << v;
-    EXPECT_TRUE(x.mean == y.mean && x.basis == y.basis && x.weights == y.weights && x.eigenvalues == y.eigenvalues)
-        << what << " slot " << v;
-  }
-  const LpcaModel &x = a.lpca(), &y = b.lpca();
-  EXPECT_EQ(x.clusters, y.clusters) << what;
-  EXPECT_EQ(x.components, y.components) << what;
-  EXPECT_TRUE(x.cluster_of == y.cluster_of) << what;
-  EXPECT_TRUE(x.cluster_components == y.cluster_components) << what;
-  EXPECT_TRUE(x.means == y.means && x.basis == y.basis && x.weights == y.weights) << what;
-  const FmfModel &f = a.fmf(), &g = b.fmf();
-  ASSERT_EQ(f.matrices.size(), g.matrices.size()) << what;
-  for (std::size_t m = 0; m < f.matrices.size(); ++m) {
-    const FmfMatrix &p = f.matrices[m], &q = g.matrices[m];
-    EXPECT_EQ(p.components, q.components) << what << " matrix " << m;
-    EXPECT_TRUE(p.singular_values == q.singular_values && p.u == q.u && p.sxv == q.sxv) << what << " matrix " << m;
-  }
-}
-
 // Compresses `input` with `flags` in one process and with 1-4 ranks: every codec array and
 // every error figure of the summary are bit-identical; the JSON names the ranks.
 void ExpectCompressionIndependentOfRanks(const std::string& input, const std::string& flags, const fs::path& dir) {
@@ -160,7 +135,7 @@ void ExpectCompressionIndependentOfRanks(const std::string& input, const std::st
       if (want.contains(key)) {  // compared as text: doubles printed with every digit
         EXPECT_EQ(got.value(key, nlohmann::json()).dump(), want[key].dump()) << key << " with " << ranks << " ranks";
       }
-    ExpectSameCodec(ref, ReadCodec(out), fmt::format("{} ranks", ranks));
+    test::ExpectSameCodec(ref, ReadCodec(out), fmt::format("{} ranks", ranks));
     std::vector<std::string> left;
     for (const auto& e : fs::directory_iterator(dir))
       if (e.path().filename().string().find(".tmp-") != std::string::npos) left.push_back(e.path().string());
@@ -273,7 +248,7 @@ TEST(Distributed, LpcaOverOneRanksMemoryLimitSucceedsWithFourRanks) {
   // The same codec as one process with enough memory.
   const fs::path free = dir / "free.h5";
   ASSERT_EQ(test::RunCommand(test::Tool("btf-compress") + " " + in + flags + " -o " + free.string()), 0);
-  ExpectSameCodec(ReadCodec(free), ReadCodec(four), "4 ranks under the limit");
+  test::ExpectSameCodec(ReadCodec(free), ReadCodec(four), "4 ranks under the limit");
 }
 
 // pca-view: the rank that owns the damaged view slot reports it (exit 3, its rank and the
