@@ -338,6 +338,34 @@ struct ClusterFit {
   std::vector<std::vector<std::size_t>> members;  // per cluster, in order (the rows each PCA was fitted on)
 };
 
+// Members of each of K clusters (texel indices in order) under `assign`. An empty cluster takes
+// the worst-fitted texel (largest residual; without residuals the first) of a cluster that can
+// spare one, and `assign` is updated.
+std::vector<std::vector<std::size_t>> MembersFillingEmpty(std::vector<std::int32_t>& assign, int K,
+                                                          const double* residual) {
+  const std::size_t n = assign.size();
+  std::vector<std::vector<std::size_t>> members(static_cast<std::size_t>(K));
+  for (std::size_t i = 0; i < n; ++i) members[static_cast<std::size_t>(assign[i])].push_back(i);
+  std::vector<std::size_t> order;
+  std::size_t next_worst = 0;
+  for (int k = 0; k < K; ++k) {
+    if (!members[static_cast<std::size_t>(k)].empty()) continue;
+    if (order.empty()) {
+      order.resize(n);
+      std::iota(order.begin(), order.end(), std::size_t(0));
+      if (residual) std::stable_sort(order.begin(), order.end(), [&](auto a, auto b) { return residual[a] > residual[b]; });
+    }
+    while (next_worst < n && members[static_cast<std::size_t>(assign[order[next_worst]])].size() <= 1) ++next_worst;
+    if (next_worst == n) break;
+    const std::size_t i = order[next_worst++];
+    auto& from = members[static_cast<std::size_t>(assign[i])];
+    from.erase(std::find(from.begin(), from.end(), i));
+    assign[i] = k;
+    members[static_cast<std::size_t>(k)].push_back(i);
+  }
+  return members;
+}
+
 // The reassignment's model: one GEMM row per cluster mean, then c rows per cluster basis (zero
 // where a cluster has fewer components); the mean norms and mean-basis products in double.
 struct ReassignModel {
@@ -714,28 +742,7 @@ class LpcaCompressor {
   // take the first sample texels of clusters that can spare one).
   void FitSample(const RowMatrixXf& M, const std::vector<std::size_t>& rows, double energy,
                  const std::vector<double>& residual, ClusterFit& f, const ClusterFit* prev) const {
-    const std::size_t S = rows.size();
-    std::vector<std::vector<std::size_t>> members(static_cast<std::size_t>(K_));
-    for (std::size_t i = 0; i < S; ++i) members[static_cast<std::size_t>(f.assign[i])].push_back(i);
-    std::vector<std::size_t> order;
-    std::size_t next_worst = 0;
-    for (int k = 0; k < K_; ++k) {
-      if (!members[static_cast<std::size_t>(k)].empty()) continue;
-      if (order.empty()) {
-        order.resize(S);
-        std::iota(order.begin(), order.end(), std::size_t(0));
-        if (!residual.empty())
-          std::stable_sort(order.begin(), order.end(), [&](auto a, auto b) { return residual[a] > residual[b]; });
-      }
-      while (next_worst < S && members[static_cast<std::size_t>(f.assign[order[next_worst]])].size() <= 1) ++next_worst;
-      if (next_worst == S) break;
-      const std::size_t i = order[next_worst++];
-      auto& from = members[static_cast<std::size_t>(f.assign[i])];
-      from.erase(std::find(from.begin(), from.end(), i));
-      f.assign[i] = k;
-      auto& to = members[static_cast<std::size_t>(k)];
-      to.insert(std::lower_bound(to.begin(), to.end(), i), i);
-    }
+    std::vector<std::vector<std::size_t>> members = MembersFillingEmpty(f.assign, K_, residual.empty() ? nullptr : residual.data());
     f.pca.assign(static_cast<std::size_t>(K_), PcaResult{});
     std::vector<int> order_k;  // to fit, largest first; the others keep prev's PCA
     for (int k = 0; k < K_; ++k) {
@@ -918,27 +925,7 @@ class LpcaCompressor {
   // cluster whose members are those it had in `prev` keeps prev's PCA (the same rows in the same
   // order with the same seed: the PCA it would compute again).
   void FitClusters(ClusterFit& f, bool have_residuals, const ClusterFit* prev = nullptr) {
-    std::vector<std::vector<std::size_t>> members(static_cast<std::size_t>(K_));
-    for (std::size_t i = 0; i < N_; ++i) members[static_cast<std::size_t>(f.assign[i])].push_back(i);
-    std::vector<std::size_t> order;
-    std::size_t next_worst = 0;
-    for (int k = 0; k < K_; ++k) {
-      if (!members[static_cast<std::size_t>(k)].empty()) continue;
-      if (order.empty()) {
-        order.resize(N_);
-        std::iota(order.begin(), order.end(), std::size_t(0));
-        if (have_residuals)
-          std::stable_sort(order.begin(), order.end(), [&](auto a, auto b) { return residual_[a] > residual_[b]; });
-      }
-      // Take the worst-fitted texel whose cluster can spare it.
-      while (next_worst < N_ && members[static_cast<std::size_t>(f.assign[order[next_worst]])].size() <= 1) ++next_worst;
-      if (next_worst == N_) break;
-      const std::size_t i = order[next_worst++];
-      auto& from = members[static_cast<std::size_t>(f.assign[i])];
-      from.erase(std::find(from.begin(), from.end(), i));
-      f.assign[i] = k;
-      members[static_cast<std::size_t>(k)].push_back(i);
-    }
+    std::vector<std::vector<std::size_t>> members = MembersFillingEmpty(f.assign, K_, have_residuals ? residual_.data() : nullptr);
     f.pca.assign(static_cast<std::size_t>(K_), PcaResult{});
     // Largest first (one cluster per thread, Eigen single-threaded inside the region); the
     // clusters that keep prev's PCA are left out.
