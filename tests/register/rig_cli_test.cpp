@@ -250,35 +250,46 @@ TEST(RigCli, CalibrateWithTooFewViewsNamesTheFilesAndField) {
   EXPECT_NE(out.find("missing required field 'tagCols'"), std::string::npos) << out;
 }
 
+// btf-synth ring photos (`synth_flags`), the manifest's camera, and `btf-register run
+// --resolution 8 --truth` on them, whose report Run(extra flags) returns.
+struct CameraRun {
+  std::filesystem::path dir = test::TempDir();
+  CameraFile manifest_camera;
+  std::string out;  // the last command's output
+
+  explicit CameraRun(const std::string& synth_flags) {
+    const std::string synth = test::Tool("btf-synth") + " photos --quiet --lights 0 --width 480 --height 360 " +
+                              synth_flags + " -o " + dir.string();
+    EXPECT_EQ(test::RunCommand(synth), 0) << synth;
+    manifest_camera.camera = ReadManifest(dir / "manifest.json").photos.at(0).camera;
+  }
+  // " --camera FILE" for `cf` written as dir/name.
+  std::string CameraFlag(const std::string& name, const CameraFile& cf) const {
+    WriteCameraFile(dir / name, cf);
+    return " --camera " + (dir / name).string();
+  }
+  json Run(const std::string& extra) {
+    const std::string run = test::Tool("btf-register") + " run --quiet --json " + (dir / "manifest.json").string() +
+                            " --resolution 8 --truth " + (dir / "truth.json").string() + " --report " +
+                            (dir / "r.json").string() + " -o " + (dir / "d.h5").string() + extra;
+    EXPECT_EQ(test::RunCommand(run, &out), 0) << out;
+    std::ifstream in(dir / "r.json");
+    return json::parse(in);
+  }
+};
+
 TEST(RigCli, RunTakesTheCameraFromCameraJson) {
   // Ring photos with k1 = -0.05: run with a camera.json holding the true intrinsics registers as
   // with the manifest's; one with a wrong fx fails the reprojection bound or moves the pose.
-  const auto dir = test::TempDir();
-  const std::string synth = test::Tool("btf-synth") +
-                            " photos --quiet --views 0 --lights 0 --width 480 --height 360 --pixel-samples 1 "
-                            "--k1 -0.05 -o " + dir.string();
-  ASSERT_EQ(test::RunCommand(synth), 0) << synth;
-  const Manifest m = ReadManifest(dir / "manifest.json");
-  CameraFile cf;
-  cf.camera = m.photos[0].camera;
-  WriteCameraFile(dir / "camera.json", cf);
-  std::string out;
-  const std::string run = test::Tool("btf-register") + " run --quiet --json " + (dir / "manifest.json").string() +
-                          " --resolution 8 --truth " + (dir / "truth.json").string() + " --report " +
-                          (dir / "r.json").string() + " -o " + (dir / "d.h5").string();
-  ASSERT_EQ(test::RunCommand(run + " --camera " + (dir / "camera.json").string(), &out), 0) << out;
-  std::ifstream in(dir / "r.json");
-  const json r = json::parse(in);
+  CameraRun c("--views 0 --pixel-samples 1 --k1 -0.05");
+  const json r = c.Run(c.CameraFlag("camera.json", c.manifest_camera));
   EXPECT_LT(r["photos"][0]["truth_homography_rms_px"].get<double>(), 0.1);
-  cf.camera.fx *= 1.05, cf.camera.fy *= 1.05;
-  WriteCameraFile(dir / "wrong.json", cf);
-  ASSERT_EQ(test::RunCommand(run + " --allow-missing --camera " + (dir / "wrong.json").string(), &out), 0) << out;
-  std::ifstream in2(dir / "r.json");
-  const json r2 = json::parse(in2);
+  CameraFile wrong = c.manifest_camera;
+  wrong.camera.fx *= 1.05, wrong.camera.fy *= 1.05;
+  const json r2 = c.Run(" --allow-missing" + c.CameraFlag("wrong.json", wrong));
   EXPECT_EQ(r2["photos"][0]["model"], "pose");
   EXPECT_GT(r2["photos"][0]["reprojection_rms_px"].get<double>(), r["photos"][0]["reprojection_rms_px"].get<double>());
 }
-
 
 TEST(RigLens, FisheyeProjectionIsOpenCvsAndUndistortionInvertsIt) {
   // cv::fisheye::projectPoints (alpha 0) is the reference; 1e-9 px is rounding (values ~ 1e3 px).
@@ -331,29 +342,12 @@ TEST(RigCli, RunTakesAFisheyeCameraFromCameraJson) {
   // 3 x 3: 0.029 and 0.003 px). The manifest records the fisheye camera (run uses it), camera.json
   // replaces it; a camera.json that drops the lens (radtan, no distortion) is worse by more than 3x
   // (measured 0.175 and 0.101 px).
-  const auto dir = test::TempDir();
-  const std::string synth = test::Tool("btf-synth") +
-                            " photos --quiet --views 0,25 --lights 0 --width 480 --height 360 --pixel-samples 3 "
-                            "--lens fisheye --fisheye-k 0.05,-0.01,0,0 -o " + dir.string();
-  ASSERT_EQ(test::RunCommand(synth), 0) << synth;
-  const Manifest m = ReadManifest(dir / "manifest.json");
-  ASSERT_TRUE(m.photos[0].camera.fisheye());
-  EXPECT_EQ(m.photos[0].camera.k2, -0.01);
-  CameraFile cf;
-  cf.camera = m.photos[0].camera;
-  WriteCameraFile(dir / "camera.json", cf);
-  std::string out;
-  const std::string run = test::Tool("btf-register") + " run --quiet --json " + (dir / "manifest.json").string() +
-                          " --resolution 8 --truth " + (dir / "truth.json").string() + " --report " +
-                          (dir / "r.json").string() + " -o " + (dir / "d.h5").string();
-  auto report = [&](const std::string& extra) {
-    EXPECT_EQ(test::RunCommand(run + extra, &out), 0) << out;
-    std::ifstream in(dir / "r.json");
-    return json::parse(in);
-  };
+  CameraRun c("--views 0,25 --pixel-samples 3 --lens fisheye --fisheye-k 0.05,-0.01,0,0");
+  ASSERT_TRUE(c.manifest_camera.camera.fisheye());
+  EXPECT_EQ(c.manifest_camera.camera.k2, -0.01);
   json fisheye;
-  for (const std::string& extra : {std::string(), " --camera " + (dir / "camera.json").string()}) {
-    const json r = report(extra);
+  for (const std::string& extra : {std::string(), c.CameraFlag("camera.json", c.manifest_camera)}) {
+    const json r = c.Run(extra);
     fisheye = r;
     for (const auto& p : r["photos"]) {
       std::printf("fisheye%s: %s homography RMS %.4f px, reprojection %.4f px\n", extra.empty() ? " (manifest)" : "",
@@ -363,10 +357,10 @@ TEST(RigCli, RunTakesAFisheyeCameraFromCameraJson) {
       EXPECT_LT(p["truth_homography_rms_px"].get<double>(), 0.1) << p["file"];
     }
   }
-  cf.camera.model = "radtan";
-  cf.camera.k1 = cf.camera.k2 = 0;
-  WriteCameraFile(dir / "pinhole.json", cf);
-  const json r = report(" --allow-missing --camera " + (dir / "pinhole.json").string());
+  CameraFile pinhole = c.manifest_camera;
+  pinhole.camera.model = "radtan";
+  pinhole.camera.k1 = pinhole.camera.k2 = 0;
+  const json r = c.Run(" --allow-missing" + c.CameraFlag("pinhole.json", pinhole));
   for (std::size_t i = 0; i < r["photos"].size(); ++i)
     EXPECT_GT(r["photos"][i]["truth_homography_rms_px"].get<double>(),
               3 * fisheye["photos"][i]["truth_homography_rms_px"].get<double>())
