@@ -147,6 +147,7 @@ TEST(TileReconstruct, TooFewPixelsForTheTileGridIsABadInput) {
     ReconstructTile(PhotoOf(r), r.lattice, o);
     FAIL() << "no error";
   } catch (const Error& e) {
+    fmt::print("{}\n", e.what());
     EXPECT_EQ(e.code(), ExitCode::kBadInput);
     EXPECT_NE(std::string(e.what()).find("--tile-samples-per-texel"), std::string::npos) << e.what();
   }
