@@ -736,10 +736,9 @@ class Registration {
     return result;
   }
 
-  // The weave lattice, once, on the reference view averaged over its lights (each light
-  // normalized by its mean so that no single bright light dominates).
-  // With lattice_resolution R != N, the reference photos are rectified again at R x R for it and
-  // the lattice is scaled to the N x N texels (x_N = (x_R + 0.5) N / R - 0.5).
+  // The weave lattice, once, on the reference view (EstimateLatticeOn). With lattice_resolution
+  // R != N, the reference photos are rectified again at R x R for it and the lattice is scaled to
+  // the N x N texels (x_N = (x_R + 0.5) N / R - 0.5).
   void EstimateReferenceLattice(int v, const std::map<int, const Image*>& by_light) {
     const int N = o_.rectify.resolution, R = o_.lattice_resolution > 0 ? o_.lattice_resolution : N;
     std::map<int, const Image*> images = by_light;
@@ -766,6 +765,8 @@ class Registration {
     for (auto& [k, m] : L.peaks) k /= f;
   }
 
+  // The lattice of view v's images averaged over its lights (each light normalized by its mean so
+  // that no single bright light dominates).
   void EstimateLatticeOn(int v, const std::map<int, const Image*>& by_light) {
     const int n = by_light.begin()->second->width;
     std::vector<float> gray(static_cast<std::size_t>(n) * n, 0.0f);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 
 #include <Eigen/Cholesky>
 #include <Eigen/LU>
@@ -176,18 +177,22 @@ ReconstructedTile ReconstructTile(const TilePhoto& in, const Lattice& L, const T
                   "lower --tile-samples-per-texel (now {}) or use --tile-method average",
                   out.pixels_used, out.pixels_masked, T, T, M, o.samples_per_texel);
 
-  // Periodic 5-point Laplacian on the grid, L^T L added with the relative weight.
-  Eigen::MatrixXd LtL = Eigen::MatrixXd::Zero(M, M);
+  // Periodic 5-point Laplacian rows on the grid (neighbours merged where T < 3 folds them
+  // together); lambda L^T L is added to the normal matrix with the relative weight.
+  std::vector<std::map<int, double>> lap(static_cast<std::size_t>(M));
+  double trace_l = 0;
   for (int j = 0; j < T; ++j)
     for (int i = 0; i < T; ++i) {
-      const int n[5] = {j * T + i, j * T + (i + 1) % T, j * T + (i + T - 1) % T, ((j + 1) % T) * T + i,
-                        ((j + T - 1) % T) * T + i};
-      const double c[5] = {4, -1, -1, -1, -1};
-      for (int a = 0; a < 5; ++a)
-        for (int b = 0; b < 5; ++b) LtL(n[a], n[b]) += c[a] * c[b];
+      auto& r = lap[static_cast<std::size_t>(j * T + i)];
+      r[j * T + i] += 4;
+      for (const int n : {j * T + (i + 1) % T, j * T + (i + T - 1) % T, ((j + 1) % T) * T + i, ((j + T - 1) % T) * T + i})
+        r[n] -= 1;
+      for (const auto& [n, w] : r) trace_l += w * w;
     }
-  const Eigen::MatrixXd data = AtA;
-  AtA += (o.smoothness * data.trace() / LtL.trace()) * LtL;
+  const double lambda = o.smoothness * AtA.trace() / trace_l;
+  for (const auto& r : lap)
+    for (const auto& [a, wa] : r)
+      for (const auto& [b, wb] : r) AtA(a, b) += lambda * wa * wb;
   const Eigen::LLT<Eigen::MatrixXd> llt(AtA);
   if (llt.info() != Eigen::Success)
     ThrowBadInput("tile reconstruction: the normal equations are singular ({} pixels, {} unknowns): raise "
@@ -195,8 +200,16 @@ ReconstructedTile ReconstructTile(const TilePhoto& in, const Lattice& L, const T
                   out.pixels_used, M, o.smoothness);
   const Eigen::MatrixXd f = llt.solve(Atb);
   if (!f.allFinite()) ThrowBadInput("tile reconstruction: the solution is not finite: raise --tile-smoothness");
+  // |A f - b|^2 = b^T b - 2 f^T A^T b + f^T (A^T A + lambda L^T L) f - lambda |L f|^2, per channel.
   double rr = btb;
-  for (int c = 0; c < C; ++c) rr += -2 * f.col(c).dot(Atb.col(c)) + f.col(c).dot(data * f.col(c));
+  for (int c = 0; c < C; ++c) {
+    rr += -2 * f.col(c).dot(Atb.col(c)) + f.col(c).dot(AtA * f.col(c));
+    for (const auto& r : lap) {
+      double lf = 0;
+      for (const auto& [n, w] : r) lf += w * f(n, c);
+      rr -= lambda * lf * lf;
+    }
+  }
   out.residual_rms = std::sqrt(std::max(0.0, rr) / (double(out.pixels_used) * C));
 
   // Each tile sample: the reconstructed function averaged over the texel box around its node
