@@ -60,7 +60,7 @@ class InverseMap {
     return false;
   }
 
-  // Refines p (near the answer; jac the Jacobian near it) to the plate point of pixel q.
+  // Refines p (near the answer) to the plate point of pixel q with a fixed inverse Jacobian from nearby.
   bool Refine(const Vec2& q, const Eigen::Matrix2d& jac_inv, Vec2* p) const {
     for (int it = 0; it < 20; ++it) {
       Vec2 f;
@@ -216,7 +216,6 @@ ReconstructedTile ReconstructTile(const TilePhoto& in, const Lattice& L, const T
   // (16 x 16 midpoints), what a normtexture texel holds.
   constexpr int B = 16;
   out.tile.tile = Image(T, T, C);
-  out.tile.tiles_used = 0;
   for (int j = 0; j < T; ++j)
     for (int i = 0; i < T; ++i) {
       const Vec2 node((i + 0.5) / T, (j + 0.5) / T);
