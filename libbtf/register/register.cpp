@@ -160,6 +160,9 @@ void RegisterOptions::Check() const {
   rectify.Check();
   lattice.Check();
   tiles.Check();
+  reconstruct.Check();
+  BTF_CHECK_OPTION(lattice_resolution >= 0 && lattice_resolution <= 8192, "lattice_resolution", "0..8192");
+  BTF_CHECK_OPTION(tile_method == "average" || tile_method == "reconstruct", "tile_method", "'average' or 'reconstruct'");
   write.Check();
   input.Check();
   hdr.Check();
@@ -201,6 +204,9 @@ json PhotoReport::ToJson() const {
     j["invalid_texel_fraction"] = invalid_fraction;
     j["max_texel_footprint_px"] = max_footprint_px;
   }
+  if (tile_pixels_used > 0)
+    j["tile_reconstruction"] = {{"pixels_used", tile_pixels_used}, {"pixels_masked", tile_pixels_masked},
+                                {"residual_rms", tile_residual_rms}};
   if (truth_corner_rms_px >= 0) j["truth_corner_rms_px"] = truth_corner_rms_px;
   if (truth_homography_rms_px >= 0) {
     j["truth_homography_rms_px"] = truth_homography_rms_px;
@@ -379,13 +385,17 @@ class Registration {
       if (o_.tile_average) {
         t.Restart();
         if (v == reference_) EstimateReferenceLattice(v, by_light);
-        for (const auto& [l, im] : by_light) {
-          const auto m = masks.find(l);
-          AveragedTile at = AverageTiles(*im, *sum_.lattice, o_.tiles, m == masks.end() ? nullptr : &m->second);
-          if (at.samples_without_valid_tile > 0)
-            sum_.reports[photo_of_.at({v, l})].warnings.push_back(fmt::format(
-                "{} tile samples are masked in every tile (averaged over all tiles there)", at.samples_without_valid_tile));
-          averaged[l] = o_.tile_output == "tile" ? std::move(at.tile) : TileImage(at, *sum_.lattice, im->width, im->height);
+        if (o_.tile_method == "reconstruct") {
+          averaged = ReconstructView(v, by_light);
+        } else {
+          for (const auto& [l, im] : by_light) {
+            const auto m = masks.find(l);
+            AveragedTile at = AverageTiles(*im, *sum_.lattice, o_.tiles, m == masks.end() ? nullptr : &m->second);
+            if (at.samples_without_valid_tile > 0)
+              sum_.reports[photo_of_.at({v, l})].warnings.push_back(fmt::format(
+                  "{} tile samples are masked in every tile (averaged over all tiles there)", at.samples_without_valid_tile));
+            averaged[l] = o_.tile_output == "tile" ? std::move(at.tile) : TileImage(at, *sum_.lattice, im->width, im->height);
+          }
         }
         for (auto& [l, im] : averaged) by_light[l] = &im;
         sum_.times.Add("tile_average", t.Seconds());
@@ -677,9 +687,87 @@ class Registration {
     return tex;
   }
 
-  // The weave lattice, once, on the reference view averaged over its lights (each light
-  // normalized by its mean so that no single bright light dominates).
+  // With tile_method "reconstruct": each registered photo of view v reconstructs the unit tile from
+  // its pixels (ReconstructTile), in the units of RectifyPhoto's normtexture (the radiometric
+  // factor evaluated at each pixel's plate point), with the masks of RectifyPhoto per pixel:
+  // hidden behind a raised marker, clipped. Photos in parallel, each solved serially.
+  std::map<int, Image> ReconstructView(int v, const std::map<int, const Image*>& by_light) {
+    std::vector<int> lights;
+    for (const auto& [l, im] : by_light) lights.push_back(l);
+    std::vector<Image> out(lights.size());
+    std::exception_ptr error;
+    std::mutex error_mutex;
+#pragma omp parallel for schedule(dynamic, 1)
+    for (std::size_t k = 0; k < lights.size(); ++k) {
+      const int i = photo_of_.at({v, lights[k]});
+      PhotoReport& r = sum_.reports[i];
+      try {
+        PhotoEntry e = manifest_.photos[i];
+        const HdrMerge merged = LoadPhoto(manifest_.photos[i], nullptr, &e.exposure);
+        const PhotoGeometry& g = geoms_[i];
+        std::vector<std::uint8_t> clipped;
+        if (merged.clipped_pixels > 0)
+          for (float c : merged.clipped.pixels) clipped.push_back(c > 0);
+        TilePhoto tp;
+        tp.photo = &merged.radiance;
+        tp.project = [&g](const Vec2& p, Vec2* px) { return g.Project(Vec3(p.x(), p.y(), 0), px); };
+        tp.sample_size_mm = S_;
+        tp.resolution = o_.rectify.resolution;
+        tp.scale = [&](const Vec2& p) { return 1.0 / (e.exposure * (o_.radiometry ? IrradianceAt(e, p) : 1.0)); };
+        if (g.has_pose)
+          tp.hidden = [&, cam = CameraCenter(g)](const Vec2& p) { return HiddenByMarker(board_, cam, Vec3(p.x(), p.y(), 0)); };
+        tp.pixel_mask = clipped.empty() ? nullptr : &clipped;
+        ReconstructedTile rt = ReconstructTile(tp, *sum_.lattice, o_.reconstruct);
+        r.tile_pixels_used = rt.pixels_used;
+        r.tile_pixels_masked = rt.pixels_masked;
+        r.tile_residual_rms = rt.residual_rms;
+        out[k] = o_.tile_output == "tile" ? std::move(rt.tile.tile) : TileImage(rt.tile, *sum_.lattice, tp.resolution, tp.resolution);
+      } catch (const Error& ex) {
+        std::lock_guard<std::mutex> lock(error_mutex);
+        if (!error) error = std::make_exception_ptr(Error(ex.code(), fmt::format("'{}': {}", r.file, ex.what())));
+      } catch (...) {
+        std::lock_guard<std::mutex> lock(error_mutex);
+        if (!error) error = std::current_exception();
+      }
+    }
+    if (error) std::rethrow_exception(error);
+    std::map<int, Image> result;
+    for (std::size_t k = 0; k < lights.size(); ++k) result[lights[k]] = std::move(out[k]);
+    return result;
+  }
+
+  // The weave lattice, once, on the reference view (EstimateLatticeOn). With lattice_resolution
+  // R != N, the reference photos are rectified again at R x R for it and the lattice is scaled to
+  // the N x N texels (x_N = (x_R + 0.5) N / R - 0.5).
   void EstimateReferenceLattice(int v, const std::map<int, const Image*>& by_light) {
+    const int N = o_.rectify.resolution, R = o_.lattice_resolution > 0 ? o_.lattice_resolution : N;
+    std::map<int, const Image*> images = by_light;
+    std::vector<Image> finer;
+    if (R != N) {
+      RectifyOptions ro = o_.rectify;
+      ro.resolution = R;
+      finer.reserve(by_light.size());
+      for (const auto& [l, im] : by_light) {
+        const int i = photo_of_.at({v, l});
+        double exposure = 0;
+        const PhotoGeometry& g = geoms_[i];
+        finer.push_back(Rectify(LoadPhoto(manifest_.photos[i], nullptr, &exposure).radiance,
+                                [&g](const Vec2& p, Vec2* px) { return g.Project(Vec3(p.x(), p.y(), 0), px); }, S_, ro));
+        images[l] = &finer.back();
+      }
+    }
+    EstimateLatticeOn(v, images);
+    if (R == N) return;
+    Lattice& L = *sum_.lattice;
+    const double f = static_cast<double>(N) / R;
+    L.a1 *= f, L.a2 *= f, L.k1 /= f, L.k2 /= f;
+    L.origin = (L.origin + Vec2(0.5, 0.5)) * f - Vec2(0.5, 0.5);
+    for (auto& [k, m] : L.peaks) k /= f;
+  }
+
+  // The lattice of view v's images averaged over its lights (each light normalized by its mean so
+  // that no single bright light dominates).
+  void EstimateLatticeOn(int v, const std::map<int, const Image*>& by_light) {
     const int n = by_light.begin()->second->width;
     std::vector<float> gray(static_cast<std::size_t>(n) * n, 0.0f);
     for (const auto& [l, im] : by_light) {
@@ -693,7 +781,7 @@ class Registration {
       }
     }
     sum_.lattice = EstimateLattice(gray, n, n, o_.lattice);
-    rep_.Info("lattice on view {}: a1 = ({:.3f}, {:.3f}), a2 = ({:.3f}, {:.3f}) texels, {} yarn cell(s) per repeat", v,
+    rep_.Info("lattice on view {} ({} x {} texels): a1 = ({:.3f}, {:.3f}), a2 = ({:.3f}, {:.3f}) texels, {} yarn cell(s) per repeat", v, n, n,
               sum_.lattice->a1.x(), sum_.lattice->a1.y(), sum_.lattice->a2.x(), sum_.lattice->a2.y(),
               sum_.lattice->yarn_cells_per_repeat);
   }
@@ -723,6 +811,7 @@ class Registration {
                        {"tile_average", o_.tile_average},
                        {"tile_output", o_.tile_output}};
     if (sum_.lattice) info.provenance["lattice"] = sum_.lattice->ToJson();
+    if (o_.tile_average) info.provenance["tile_method"] = o_.tile_method;
     DatasetWriteOptions wo = o_.write;
     if (wo.creator == "libbtf") wo.creator = "btf-register";
     writer_ = std::make_unique<DatasetWriter>(output, views_, lights_, first.height, first.width, channels_, info, wo);

@@ -25,6 +25,7 @@
 #include "libbtf/register/hdr.h"
 #include "libbtf/register/lattice.h"
 #include "libbtf/register/rectify.h"
+#include "libbtf/register/tile_reconstruct.h"
 
 namespace btf {
 
@@ -44,7 +45,17 @@ struct RegisterOptions {
   bool tile_average = false;
   std::string tile_output = "tiling";  // "tiling": N x N regular tiling; "tile": the averaged T x T tile
   LatticeOptions lattice;
+  // Normtexture side on which the lattice is estimated (the reference view rectified again at
+  // this resolution, the lattice scaled to N); 0 = N. A finer one keeps the weave's harmonics
+  // from aliasing: at N = 64 the twill's 0.625 cycles/texel harmonic folds to 0.375 and the
+  // estimate is a wrong lattice; at 128 it is right (docs/btf-register.md, "Unit-tile reconstruction").
+  int lattice_resolution = 0;
   TileAverageOptions tiles;
+  // With tile_average, how the unit tile is obtained: "average" (trimmed mean of the rectified
+  // repeats, AverageTiles) or "reconstruct" (least squares from every photo pixel on the sample,
+  // ReconstructTile: the photo's pixels at all sub-pixel phases of the repeats).
+  std::string tile_method = "average";
+  TileReconstructOptions reconstruct;
   int contact_sheet_thumb = 128;  // thumbnail side in the contact sheet (0 = no contact sheet)
   std::filesystem::path truth;    // optional truth.json (btf-synth photos): adds errors to the report
   DatasetWriteOptions write;
@@ -70,6 +81,10 @@ struct PhotoReport {
   // nearest unmasked texel without it): hidden behind a raised marker (a line of sight through a
   // marker's printed area), touching a pixel clipped in every exposure of a bracket.
   std::size_t masked_hidden = 0, masked_clipped = 0;
+  // With tile_method "reconstruct": pixels used as equations, pixels on the sample left out
+  // (hidden behind a marker or clipped) and the RMS of the pixel equations after the solve.
+  int tile_pixels_used = 0, tile_pixels_masked = 0;
+  double tile_residual_rms = 0;
   std::vector<std::string> warnings;
   // With RegisterOptions::truth: RMS against the true marker corners and the true surface
   // homography over an 11 x 11 grid on the sample (px); -1 = not computed.

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <fstream>
 #include <map>
+#include <vector>
 
 #include <Eigen/LU>
 #include <fmt/format.h>
@@ -126,6 +127,61 @@ TEST(RegisterAccuracy, SeventyFiveDegreesWithinTwoPercentAtThreeTimesThePixels) 
     // Measured: spline 0.014 interior (area 0.020, over the 2 %). Bound: the issue's 2 % with spline.
     if (filter == "spline") EXPECT_LT(rel_in, 0.02);
     EXPECT_GT(masked, 0);  // the near edge behind the raised markers is masked and counted
+  }
+}
+
+// Issue #13's 2 % at 75 deg on the table's 1280 x 960 photos, for a periodic sample: the unit
+// tile reconstructed from every photo pixel (--tile-average --tile-method reconstruct) against the
+// plain tile average (--tile-average) and the per-texel rectification, at 0, 60 and 75 deg (view 0
+// is in the run: the lattice is estimated on the most frontal view, here rectified at 128 x 128:
+// at 64 x 64 a twill harmonic aliases and the estimated lattice is wrong, docs/btf-register.md).
+TEST(RegisterAccuracy, TileReconstructionAtSteepViews) {
+  const auto dir = test::TempDir();
+  const std::string views = "0,45,70";
+  const std::string synth = test::Tool("btf-synth");
+  ASSERT_EQ(test::RunCommand(synth + " photos --quiet --views " + views + " --lights 0 --marker-height 1 --k1 -0.05 -o " +
+                             (dir / "ph").string()),
+            0);
+  ASSERT_EQ(test::RunCommand(synth + " btf --quiet --views " + views +
+                             " --lights 0 --resolution 64 --tiles 10 --samples 32 -o " + (dir / "gt.h5").string() +
+                             " 2>/dev/null"),
+            0);
+  const Dataset gt = ReadDataset(dir / "gt.h5");
+  const std::vector<std::pair<std::string, std::string>> methods = {
+      {"rectified", ""}, {"average", " --tile-average --lattice-resolution 128"},
+      {"reconstruct", " --tile-average --lattice-resolution 128 --tile-method reconstruct"}};
+  std::map<std::string, std::vector<std::pair<double, double>>> rms;
+  for (const auto& [name, flags] : methods) {
+    std::string out;
+    ASSERT_EQ(test::RunCommand(test::Tool("btf-register") + " run --quiet " + (dir / "ph/manifest.json").string() +
+                                   " -o " + (dir / (name + ".h5")).string() + " --resolution 64" + flags,
+                               &out),
+              0)
+        << out;
+    const Dataset d = ReadDataset(dir / (name + ".h5"));
+    ASSERT_EQ(d.size(), gt.size());
+    for (int v = 0; v < d.num_views(); ++v) rms[name].push_back(RelativeRms(gt, d, v));
+  }
+  fmt::print("theta  rectified_all  rectified_interior  average_all  average_interior  reconstruct_all  "
+             "reconstruct_interior\n");
+  for (int v = 0; v < gt.num_views(); ++v) {
+    const double theta = RadToDeg(gt.views().angles(v).theta);
+    fmt::print("{:5.0f}  {:13.4f}  {:18.4f}  {:11.4f}  {:16.4f}  {:15.4f}  {:20.4f}\n", theta, rms["rectified"][v].first,
+               rms["rectified"][v].second, rms["average"][v].first, rms["average"][v].second,
+               rms["reconstruct"][v].first, rms["reconstruct"][v].second);
+  }
+  // Measured (docs/btf-register.md, "Unit-tile reconstruction"), interior = all texels (the tiling
+  // is the same everywhere): reconstruct 0.0028 / 0.0061 / 0.0109 at 0 / 60 / 75 deg, the tile
+  // average 0.0546 / 0.0803 / 0.0941, per-texel rectification 0.0079 / 0.0205 / 0.0686 interior.
+  // Bounds: about 2 x the measured value at 0 and 60 deg (0.006, 0.012), the issue's 2 % at 75 deg;
+  // and better than both other methods at every view.
+  for (int v = 0; v < gt.num_views(); ++v) {
+    const double theta = RadToDeg(gt.views().angles(v).theta);
+    const double bound = theta < 1 ? 0.006 : theta < 70 ? 0.012 : 0.02;
+    EXPECT_LT(rms["reconstruct"][v].first, bound) << theta;
+    EXPECT_LT(rms["reconstruct"][v].second, bound) << theta;
+    EXPECT_LT(rms["reconstruct"][v].second, rms["average"][v].second) << theta;
+    EXPECT_LT(rms["reconstruct"][v].second, rms["rectified"][v].second) << theta;
   }
 }
 

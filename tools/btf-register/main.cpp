@@ -276,7 +276,17 @@ int main(int argc, char** argv) {
   cr->add_option("--thumb", ro.contact_sheet_thumb, "Contact-sheet thumbnail side, px");
   cr->add_flag("--tile-average", ro.tile_average, "Estimate the weave lattice and average all unit tiles");
   cr->add_option("--tile-output", ro.tile_output, "With --tile-average: 'tiling' (N x N) or 'tile' (the averaged tile)");
+  cr->add_option("--tile-method", ro.tile_method,
+                 "With --tile-average: 'average' (trimmed mean of the rectified repeats) or 'reconstruct' (least "
+                 "squares from every photo pixel)");
+  cr->add_option("--tile-samples-per-texel", ro.reconstruct.samples_per_texel,
+                 "reconstruct: tile grid samples per texel along each lattice axis");
+  cr->add_option("--tile-pixel-samples", ro.reconstruct.pixel_samples,
+                 "reconstruct: sub-samples per pixel axis integrating each pixel's box");
+  cr->add_option("--tile-smoothness", ro.reconstruct.smoothness, "reconstruct: relative Laplacian (smoothness) weight");
   cr->add_option("--trim", ro.tiles.trim_fraction, "Trimmed-mean fraction dropped at each end when averaging tiles");
+  cr->add_option("--lattice-resolution", ro.lattice_resolution,
+                 "With --tile-average: estimate the lattice on the reference view rectified at this side (0 = N)");
   cr->add_option("--max-yarns", ro.lattice.max_yarns_per_repeat, "Largest yarns-per-repeat searched (twill, satin)");
   cr->add_flag("--allow-missing", rf.allow_missing, "Exit 0 even if some photos fail (they are still reported)");
   cr->add_option("--truth", ro.truth, "truth.json (btf-synth photos): add errors against the truth to the report");
