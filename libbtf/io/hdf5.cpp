@@ -15,6 +15,7 @@
 #include "libbtf/core/dataset.h"
 #include "libbtf/core/error.h"
 #include "libbtf/io/half.h"
+#include "libbtf/io/raw_chunks.h"
 
 namespace btf::h5 {
 
@@ -487,9 +488,10 @@ void File::WriteSlab(const std::string& name, const std::vector<hsize_t>& offset
 }
 
 void File::ReadSlab(const std::string& name, const std::vector<hsize_t>& offset, const std::vector<hsize_t>& count,
-                    float* data) const {
+                    float* data, bool raw_chunks) const {
   Handle ds = OpenDataset(name);
   Handle fspace = SelectSlab(*this, ds.id(), name, offset, count);
+  if (raw_chunks && ReadRawChunks(*this, ds.id(), name, offset, count, data, raw_chunks_)) return;
   Handle mspace(H5Screate_simple(static_cast<int>(count.size()), count.data(), nullptr));
   herr_t status;
   if (StoredAsHalf(ds.id())) {
