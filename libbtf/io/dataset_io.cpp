@@ -187,7 +187,7 @@ DatasetReader::DatasetReader(const std::filesystem::path& path, const DatasetRea
 void DatasetReader::ReadImage(int view, int light, float* out) const {
   const auto& h = header_;
   file_.ReadSlab(kData, {hsize_t(view), hsize_t(light), 0, 0, 0},
-                 {1, 1, hsize_t(h.height), hsize_t(h.width), hsize_t(h.channels)}, out);
+                 {1, 1, hsize_t(h.height), hsize_t(h.width), hsize_t(h.channels)}, out, raw_chunks_);
 }
 
 void DatasetReader::ReadViewSlot(int view, float* out) const {
