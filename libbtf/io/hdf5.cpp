@@ -6,7 +6,6 @@
 #include <cstdio>
 #include <cstring>
 #include <ctime>
-#include <mutex>
 #include <type_traits>
 
 #include <sys/stat.h>
@@ -58,8 +57,11 @@ herr_t NoteIoError(hid_t, void*) {
 }  // namespace
 
 void SilenceErrors() {
-  static std::once_flag once;
-  std::call_once(once, [] { H5Eset_auto2(H5E_DEFAULT, NoteIoError, nullptr); });
+  // Per thread: the thread-safe HDF5 keeps one error-reporting setting per thread (slots are
+  // read on a prefetch thread).
+  thread_local bool silenced = false;
+  if (!silenced) H5Eset_auto2(H5E_DEFAULT, NoteIoError, nullptr);
+  silenced = true;
 }
 
 bool IoErrorSeen() { return g_io_error_seen.load(); }
@@ -489,6 +491,7 @@ void File::WriteSlab(const std::string& name, const std::vector<hsize_t>& offset
 
 void File::ReadSlab(const std::string& name, const std::vector<hsize_t>& offset, const std::vector<hsize_t>& count,
                     float* data, bool raw_chunks) const {
+  SilenceErrors();
   Handle ds = OpenDataset(name);
   Handle fspace = SelectSlab(*this, ds.id(), name, offset, count);
   if (raw_chunks && ReadRawChunks(*this, ds.id(), name, offset, count, data, raw_chunks_)) return;

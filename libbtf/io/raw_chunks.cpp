@@ -213,8 +213,13 @@ bool ReadRawChunks(const File& file, hid_t ds, const std::string& name, const st
   scratch.resize(begin[chunks]);
   std::vector<std::uint32_t> masks(chunks, 0);
   for (std::size_t t = 0; t < chunks; ++t)
-    if (H5Dread_chunk(ds, H5P_DEFAULT, &coords[t * rank], &masks[t], scratch.data() + begin[t]) < 0)
-      ThrowUnreadable(file.path(), ChunkName(file, name, *plan, &coords[t * rank]));
+    if (H5Dread_chunk(ds, H5P_DEFAULT, &coords[t * rank], &masks[t], scratch.data() + begin[t]) < 0) {
+      // ChunkName's HDF5 calls would replace the error stack ThrowUnreadable inspects (I/O or not).
+      const hid_t stack = H5Eget_current_stack();
+      const std::string chunk = ChunkName(file, name, *plan, &coords[t * rank]);
+      H5Eset_current_stack(stack);  // (closes `stack`)
+      ThrowUnreadable(file.path(), chunk);
+    }
 
   // On the compute threads: one decompressor and one chunk buffer per thread, made here (no
   // allocation, nothing that throws, inside the parallel loop).
