@@ -10,8 +10,11 @@
 
 #include <Eigen/Core>
 #include <Eigen/SVD>
+#include <chrono>
 #include <cmath>
 #include <cstdlib>
+#include <filesystem>
+#include <fstream>
 #include <limits>
 #include <map>
 #include <memory>
@@ -19,9 +22,11 @@
 #include <sstream>
 
 #include <omp.h>
+#include <unistd.h>
 
 #include "libbtf/compress/codec.h"
 #include "libbtf/compress/pca.h"
+#include "libbtf/io/dataset_io.h"
 #include "bench/synthetic_btf.h"
 
 namespace {
@@ -377,6 +382,69 @@ void BM_DecodeValue(benchmark::State& st) {
   st.counters["values_per_s"] = benchmark::Counter(double(st.iterations()), benchmark::Counter::kIsRate);
 }
 BENCHMARK(BM_DecodeValue)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond)->MinTime(1.0)->UseRealTime();
+
+// Reading every view slot of a dataset file through DatasetReader (docs/btf-compress.md,
+// "Reading"): Arg 0 H5Dread (HDF5's filter pipeline, zlib on one thread), Arg 1 the raw chunk
+// path (libbtf/io/raw_chunks.h: checksum, inflate and unshuffle on all threads), same file, same
+// run. The file is BTF_BENCH_READ_FILE, or else the benchmarks' synthetic BTF (bench/
+// synthetic_btf.h, as bench_synthetic_input writes it) at BTF_BENCH_RES, written to a temporary
+// file first. The file is read once before either is timed, so both find it in the page cache.
+// GB_per_s: float32 values delivered (4 V L H W C bytes) per wall second.
+class ReadBenchFile {
+ public:
+  ReadBenchFile() {
+    if (const char* e = std::getenv("BTF_BENCH_READ_FILE")) {
+      path_ = e;
+    } else {
+      const int n = Resolution();
+      const btf::Sampling s = btf::Sampling::Bonn81();
+      path_ = std::filesystem::temp_directory_path() / ("btf_bench_read_" + std::to_string(getpid()) + ".h5");
+      temporary_ = true;
+      btf::DatasetWriter w(path_, s, s, n, n, 3, btf::DatasetInfo{});
+      std::vector<float> slot(std::size_t(s.size()) * n * n * 3);
+      for (int v = 0; v < s.size(); ++v) {
+        btf::bench::SyntheticViewSlot(s, n, v, slot.data());
+        w.WriteViewSlot(v, slot.data());
+      }
+      w.Commit();
+    }
+    std::ifstream in(path_, std::ios::binary);
+    std::vector<char> buf(1 << 20);
+    while (in.read(buf.data(), std::streamsize(buf.size())) || in.gcount() > 0) {
+    }
+  }
+  ~ReadBenchFile() {
+    std::error_code ec;
+    if (temporary_) std::filesystem::remove(path_, ec);
+  }
+  const std::filesystem::path& path() const { return path_; }
+
+ private:
+  std::filesystem::path path_;
+  bool temporary_ = false;
+};
+
+void BM_ReadViewSlots(benchmark::State& st) {
+  static const ReadBenchFile file;
+  btf::DatasetReadOptions o;
+  o.raw_chunks = st.range(0) == 1;
+  const btf::DatasetReader r(file.path(), o);
+  const auto& h = r.header();
+  std::vector<float> slot(std::size_t(h.num_lights) * h.height * h.width * h.channels);
+  const auto start = std::chrono::steady_clock::now();
+  for (auto _ : st) {
+    for (int v = 0; v < h.num_views; ++v) r.ReadViewSlot(v, slot.data());
+    benchmark::DoNotOptimize(slot.data());
+  }
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const double bytes = 4.0 * double(slot.size()) * h.num_views;
+  st.SetLabel(std::string(o.raw_chunks ? "raw chunks, " + std::to_string(omp_get_max_threads()) + " threads" : "H5Dread") +
+              ", " + h.storage + ", " + std::to_string(h.num_views) + " x " + std::to_string(h.num_lights) + " x " +
+              std::to_string(h.height) + "^2 x " + std::to_string(h.channels));
+  st.counters["float_GB"] = bytes * 1e-9;
+  st.counters["GB_per_s"] = bytes * double(st.iterations()) / seconds * 1e-9;
+}
+BENCHMARK(BM_ReadViewSlots)->Arg(0)->Arg(1)->Unit(benchmark::kSecond)->Iterations(2)->UseRealTime();
 
 // Decoding of codec files named by BTF_BENCH_CODECS (comma-separated paths; none: not run): one
 // view slot per iteration, cycling through the views, on 1 thread and on all; values_per_s as in

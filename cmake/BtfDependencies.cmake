@@ -14,6 +14,8 @@ find_package(apriltag REQUIRED)
 # package needs its command-line tools installed.
 find_package(PkgConfig REQUIRED)
 pkg_check_modules(LIBZIP REQUIRED IMPORTED_TARGET libzip)
+# libdeflate (Debian: libdeflate-dev) inflates dataset chunks on the compute threads (libbtf/io/raw_chunks.h).
+pkg_check_modules(LIBDEFLATE REQUIRED IMPORTED_TARGET libdeflate)
 set(HDF5_PREFER_PARALLEL OFF)
 find_package(HDF5 REQUIRED COMPONENTS C)
 if(NOT TARGET btf_hdf5)

@@ -1,6 +1,7 @@
 #include "libbtf/io/dataset_io.h"
 
 #include <cmath>
+#include <cstdlib>
 #include <memory>
 #include <sstream>
 
@@ -176,24 +177,28 @@ void WriteDataset(const std::filesystem::path& path, const Dataset& d, const Dat
   w.Commit();
 }
 
-DatasetReader::DatasetReader(const std::filesystem::path& path) : file_(h5::File::Open(path)) {
+DatasetReader::DatasetReader(const std::filesystem::path& path, const DatasetReadOptions& options)
+    : file_(h5::File::Open(path)) {
   header_ = ReadHeader(file_);
+  const char* env = std::getenv("BTF_RAW_CHUNKS");
+  raw_chunks_ = options.raw_chunks && !(env && std::string(env) == "0");
 }
 
 void DatasetReader::ReadImage(int view, int light, float* out) const {
   const auto& h = header_;
   file_.ReadSlab(kData, {hsize_t(view), hsize_t(light), 0, 0, 0},
-                 {1, 1, hsize_t(h.height), hsize_t(h.width), hsize_t(h.channels)}, out);
+                 {1, 1, hsize_t(h.height), hsize_t(h.width), hsize_t(h.channels)}, out, raw_chunks_);
 }
 
 void DatasetReader::ReadViewSlot(int view, float* out) const {
   const auto& h = header_;
   file_.ReadSlab(kData, {hsize_t(view), 0, 0, 0, 0},
-                 {1, hsize_t(h.num_lights), hsize_t(h.height), hsize_t(h.width), hsize_t(h.channels)}, out);
+                 {1, hsize_t(h.num_lights), hsize_t(h.height), hsize_t(h.width), hsize_t(h.channels)}, out,
+                 raw_chunks_);
 }
 
-Dataset ReadDataset(const std::filesystem::path& path) {
-  DatasetReader r(path);
+Dataset ReadDataset(const std::filesystem::path& path, const DatasetReadOptions& options) {
+  DatasetReader r(path, options);
   const auto& h = r.header();
   Dataset d(h.views, h.lights, h.height, h.width, h.channels, h.info);
   for (int v = 0; v < h.num_views; ++v) r.ReadViewSlot(v, d.view_slot(v).data());

@@ -19,6 +19,15 @@ struct DatasetWriteOptions {
   void Check() const;
 };
 
+struct DatasetReadOptions {
+  // true: the chunks of /btf/data are read raw and decoded on the compute threads (Fletcher-32,
+  // libdeflate inflate, unshuffle, half -> float; docs/btf-compress.md "Reading"), whenever the
+  // file stores them as libbtf writes them; other files, and false: H5Dread (single-threaded
+  // zlib). Both give the same values. BTF_RAW_CHUNKS=0 in the environment sets false for every
+  // reader (A/B timings of the tools).
+  bool raw_chunks = true;
+};
+
 // Everything about a dataset file except the texel values.
 struct DatasetHeader {
   std::string path, format_version, creator, creation_time, storage;
@@ -29,7 +38,7 @@ struct DatasetHeader {
 
 // Writes atomically (temporary file + rename).
 void WriteDataset(const std::filesystem::path& path, const Dataset& dataset, const DatasetWriteOptions& options = {});
-Dataset ReadDataset(const std::filesystem::path& path);
+Dataset ReadDataset(const std::filesystem::path& path, const DatasetReadOptions& options = {});
 
 // The sampling tables PREFIX_directions / PREFIX_angles as in the dataset format (also used by
 // the codec format). Reading checks shape and unit length (bad input naming the file).
@@ -39,7 +48,7 @@ Sampling ReadSamplingTables(const h5::File& file, const std::string& prefix);
 // Random access without reading the whole file: one image or one view slot at a time.
 class DatasetReader {
  public:
-  explicit DatasetReader(const std::filesystem::path& path);
+  explicit DatasetReader(const std::filesystem::path& path, const DatasetReadOptions& options = {});
   const DatasetHeader& header() const { return header_; }
   // height x width x channels floats.
   void ReadImage(int view, int light, float* out) const;
@@ -49,6 +58,7 @@ class DatasetReader {
  private:
   h5::File file_;
   DatasetHeader header_;
+  bool raw_chunks_;
 };
 
 // Incremental writer: create, write view slots (or images) in any order, then Commit(). Lets

@@ -6,7 +6,6 @@
 #include <cstdio>
 #include <cstring>
 #include <ctime>
-#include <mutex>
 #include <type_traits>
 
 #include <sys/stat.h>
@@ -15,6 +14,7 @@
 #include "libbtf/core/dataset.h"
 #include "libbtf/core/error.h"
 #include "libbtf/io/half.h"
+#include "libbtf/io/raw_chunks.h"
 
 namespace btf::h5 {
 
@@ -57,8 +57,11 @@ herr_t NoteIoError(hid_t, void*) {
 }  // namespace
 
 void SilenceErrors() {
-  static std::once_flag once;
-  std::call_once(once, [] { H5Eset_auto2(H5E_DEFAULT, NoteIoError, nullptr); });
+  // Per thread: the thread-safe HDF5 keeps one error-reporting setting per thread (slots are
+  // read on a prefetch thread).
+  thread_local bool silenced = false;
+  if (!silenced) H5Eset_auto2(H5E_DEFAULT, NoteIoError, nullptr);
+  silenced = true;
 }
 
 bool IoErrorSeen() { return g_io_error_seen.load(); }
@@ -487,9 +490,11 @@ void File::WriteSlab(const std::string& name, const std::vector<hsize_t>& offset
 }
 
 void File::ReadSlab(const std::string& name, const std::vector<hsize_t>& offset, const std::vector<hsize_t>& count,
-                    float* data) const {
+                    float* data, bool raw_chunks) const {
+  SilenceErrors();
   Handle ds = OpenDataset(name);
   Handle fspace = SelectSlab(*this, ds.id(), name, offset, count);
+  if (raw_chunks && ReadRawChunks(*this, ds.id(), name, offset, count, data, raw_chunks_)) return;
   Handle mspace(H5Screate_simple(static_cast<int>(count.size()), count.data(), nullptr));
   herr_t status;
   if (StoredAsHalf(ds.id())) {

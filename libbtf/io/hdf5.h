@@ -91,14 +91,16 @@ class File {
   std::vector<float> ReadFloats(const std::string& name) const;
   std::vector<std::int32_t> ReadInts(const std::string& name) const;
 
-  // Chunked float dataset for large arrays (shuffle + deflate).
+  // Chunked float dataset for large arrays: shuffle + deflate (deflate_level > 0), then fletcher32.
   void CreateFloatArray(const std::string& name, const std::vector<hsize_t>& dims, const std::vector<hsize_t>& chunk,
                         Storage storage, int deflate_level) const;
   // Reads or writes the hyperslab [offset, offset+count) of a float dataset.
   void WriteSlab(const std::string& name, const std::vector<hsize_t>& offset, const std::vector<hsize_t>& count,
                  const float* data) const;
+  // raw_chunks: the chunks of a dataset stored as libbtf writes them are read raw and decoded on
+  // the compute threads (raw_chunks.h; same values as H5Dread); false, or any other dataset: H5Dread.
   void ReadSlab(const std::string& name, const std::vector<hsize_t>& offset, const std::vector<hsize_t>& count,
-                float* data) const;
+                float* data, bool raw_chunks = true) const;
   // "float32" or "float16".
   std::string StorageOf(const std::string& name) const;
 
@@ -121,6 +123,7 @@ class File {
   void CloseQuietly();
   Handle file_;
   std::string path_;
+  mutable std::vector<std::uint8_t> raw_chunks_;  // ReadSlab's raw chunk bytes, reused between reads
   bool created_ = false;  // made by Create(): its content may be discarded on a failed close
   std::uint64_t failed_closes_at_create_ = 0;
 };

@@ -44,7 +44,8 @@ class MemorySlotSource final : public SlotSource {
 
 class FileSlotSource final : public SlotSource {
  public:
-  explicit FileSlotSource(const std::filesystem::path& path) : reader_(path), name_(path.string()) {}
+  FileSlotSource(const std::filesystem::path& path, const DatasetReadOptions& options)
+      : reader_(path, options), name_(path.string()) {}
   const std::string& name() const override { return name_; }
   std::string kind() const override { return kDatasetFormat; }
   const Sampling& views() const override { return reader_.header().views; }
@@ -82,8 +83,8 @@ std::unique_ptr<SlotSource> MemorySource(const Dataset& dataset, std::string nam
   return std::make_unique<MemorySlotSource>(dataset, std::move(name));
 }
 
-std::unique_ptr<SlotSource> OpenDatasetSource(const std::filesystem::path& path) {
-  return std::make_unique<FileSlotSource>(path);
+std::unique_ptr<SlotSource> OpenDatasetSource(const std::filesystem::path& path, const DatasetReadOptions& options) {
+  return std::make_unique<FileSlotSource>(path, options);
 }
 
 void CheckCompatible(const SlotSource& ref, const SlotSource& test) {

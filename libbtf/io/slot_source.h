@@ -8,6 +8,7 @@
 #include <string>
 
 #include "libbtf/core/dataset.h"
+#include "libbtf/io/dataset_io.h"
 
 namespace btf {
 
@@ -40,7 +41,7 @@ class SlotSource {
 // The in-memory dataset must outlive the source.
 std::unique_ptr<SlotSource> MemorySource(const Dataset& dataset, std::string name = "in-memory dataset");
 // A dataset file ("libbtf-dataset"), read one slot at a time; bad files throw btf::Error naming it.
-std::unique_ptr<SlotSource> OpenDatasetSource(const std::filesystem::path& path);
+std::unique_ptr<SlotSource> OpenDatasetSource(const std::filesystem::path& path, const DatasetReadOptions& options = {});
 
 // Throws btf::Error (bad input) unless both have the same shape and samplings (directions equal to
 // 1e-6, about 0.2 arc seconds); the message names both inputs and the first difference.

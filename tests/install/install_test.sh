@@ -67,7 +67,7 @@ for kind in shared static; do
     # Only the public dependencies reach it: libbtf's private ones were neither looked for nor linked.
     ! grep -E '^(OpenCV|OpenImageIO|apriltag)_DIR' "$work/cmake-$kind/CMakeCache.txt" ||
       fail "find_package(libbtf) with the shared libraries looked for a private dependency"
-    ! readelf -d "$work/cmake-$kind/consumer" | grep -E 'NEEDED.*(opencv|OpenImageIO|apriltag|libzip|gomp)' ||
+    ! readelf -d "$work/cmake-$kind/consumer" | grep -E 'NEEDED.*(opencv|OpenImageIO|apriltag|libzip|libdeflate|gomp)' ||
       fail "the shared consumer links a private dependency of libbtf"
   else
     ! readelf -d "$work/cmake-$kind/consumer" | grep -q 'NEEDED.*libbtf_' || fail "static consumer loads a libbtf shared library"
