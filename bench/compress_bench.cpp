@@ -205,7 +205,7 @@ void BM_Lpca(benchmark::State& st) {
     s = btf::Compress(o, *source, LpcaCodec().get());
   }
   SetSizeCounters(st);
-  st.SetLabel(o.gram_limit ? "gram_limit " + std::to_string(o.gram_limit) + " (before)" : "Gram where cheaper (default)");
+  st.SetLabel("gram_limit " + std::to_string(o.gram_limit) + (o.gram_limit == btf::CompressOptions{}.gram_limit ? " (default)" : " (before)"));
   for (const auto& [name, sec] : s.times.phases()) st.counters[name + "_s"] = sec;
   st.counters["rounds"] = double(s.iteration_errors.size());
   st.counters["relative_error"] = s.relative_error;
@@ -214,16 +214,15 @@ void BM_Lpca(benchmark::State& st) {
   st.counters["ratio_vs_half"] = s.ratio_half;
   // Reassignment GEMM: N x d x K (c + 1) multiply-adds per round; its share is reported by the
   // kernel benchmark below.
-  if (o.gram_limit == 0) g_lpca_seconds = s.times.Total();
+  if (o.gram_limit == btf::CompressOptions{}.gram_limit) g_lpca_seconds = s.times.Total();
 }
-// Args: max_iterations, gram_limit. The fixed rule of before (Gram for clusters of <= 1024
-// texels) first, then the default (the Gram where it is cheaper), whose codec the decode
-// benchmarks use.
-BENCHMARK(BM_Lpca)->Args({20, 1024})->Args({20, 0})->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
+// Args: max_iterations, gram_limit. The limit of before (Gram for clusters of <= 1024 texels)
+// first, then the default (256), whose codec the decode benchmarks use.
+BENCHMARK(BM_Lpca)->Args({20, 1024})->Args({20, 256})->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 
 // One cluster's PCA (n texels' ABRDFs, 81 x 81 x 3 values; c = 8 as BM_Lpca) on one thread, by
 // either path: Arg 1: n, Arg 2: 0 Gram (double), 1 randomized (18 test vectors, 2 power
-// iterations), so the crossover that GramCheaper (pca.h) predicts can be checked.
+// iterations): where the Gram path stops being the faster one (CompressOptions::gram_limit).
 // relative_residual: the residual energy over the centred energy (the randomized path's
 // approximation shows as a larger value).
 void BM_ClusterPca(benchmark::State& st) {
@@ -245,7 +244,6 @@ void BM_ClusterPca(benchmark::State& st) {
   for (auto _ : st) r = btf::Pca(X, q);
   omp_set_num_threads(before);
   st.SetLabel(r.randomized ? "randomized" : "Gram");
-  st.counters["predicted_gram_cheaper"] = btf::GramCheaper(n, 18, 2);
   st.counters["relative_residual"] = r.residual_energy / r.centered_energy;
 }
 BENCHMARK(BM_ClusterPca)

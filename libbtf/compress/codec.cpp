@@ -96,7 +96,7 @@ void CompressOptions::Check() const {
   BTF_CHECK_OPTION(min_improvement >= 0 && min_improvement < 1, "min_improvement", "must be in [0, 1)");
   BTF_CHECK_OPTION(lpca_memory == "auto" || lpca_memory == "in-core" || lpca_memory == "out-of-core", "lpca_memory",
                    "must be auto, in-core or out-of-core");
-  BTF_CHECK_OPTION(gram_limit >= 0, "gram_limit", "must be >= 0 (0: by cost)");
+  BTF_CHECK_OPTION(gram_limit >= 1, "gram_limit", "must be >= 1");
   BTF_CHECK_OPTION(lpca_sample >= 1, "lpca_sample", "must be >= 1");
   BTF_CHECK_OPTION(storage == CodecStorage::kFloat || !IsFullMatrixFactorisation(method), "storage",
                    "half storage is for pca-view and lpca codecs (fmf/dfmf factors are stored as float)");

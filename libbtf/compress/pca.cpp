@@ -108,13 +108,6 @@ void Finish(const RowMatrixXf& Xc, PcaResult& r) {
 
 }  // namespace
 
-bool GramCheaper(Eigen::Index small, Eigen::Index rank, int power_iterations) {
-  const double s = double(small), r = double(rank);
-  const double gram = s * (s + 1);  // s (s + 1) / 2 double multiply-adds, each worth two float ones
-  const double randomized = double(2 * power_iterations + 2) * r * s + r * (r + 1);
-  return gram <= randomized;
-}
-
 PcaResult Pca(const Eigen::Ref<const RowMatrixXf>& X, const PcaRequest& q) {
   PcaResult r;
   const Eigen::Index n = X.rows(), d = X.cols();
@@ -126,9 +119,7 @@ PcaResult Pca(const Eigen::Ref<const RowMatrixXf>& X, const PcaRequest& q) {
   r.clamped_to = limit;
   const Eigen::Index small = std::min(n, d);
   const int want = std::min(q.max_components, limit);
-  const Eigen::Index rank = std::min<Eigen::Index>(want + q.oversampling, small);
-  const bool gram = 2 * (want + q.oversampling) >= small ||
-                    (q.gram_limit > 0 ? small <= q.gram_limit : GramCheaper(small, rank, q.power_iterations));
+  const bool gram = small <= q.gram_limit || 2 * (want + q.oversampling) >= small;
   std::vector<double> eig;
   if (want <= 0 || r.centered_energy <= 0) {
     r.basis.resize(0, d);
@@ -162,6 +153,7 @@ PcaResult Pca(const Eigen::Ref<const RowMatrixXf>& X, const PcaRequest& q) {
     for (int k = 0; k < c; ++k) r.basis.row(k) = es.eigenvectors().col(d - 1 - k).cast<float>().transpose();
   } else {
     r.randomized = true;
+    const Eigen::Index rank = std::min<Eigen::Index>(want + q.oversampling, small);
     std::mt19937_64 rng(q.seed);
     std::normal_distribution<float> normal(0.0f, 1.0f);
     Eigen::MatrixXf omega(d, rank);

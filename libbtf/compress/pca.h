@@ -16,10 +16,7 @@ struct PcaRequest {
   int max_components = 16;
   double target_error = 0;     // > 0: smallest c with ||X - X'||_F / ||X||_F <= target_error
   double retained_energy = 0;  // > 0: smallest c retaining this fraction of the centered energy
-  // Gram/covariance path when min(n, d) <= gram_limit; 0: where GramCheaper says it costs fewer
-  // flops than the randomized path. Either way also when the request is close to full rank
-  // (2 (c + oversampling) >= min(n, d)).
-  int gram_limit = 0;
+  int gram_limit = 256;        // Gram/covariance path when min(n, d) <= gram_limit
   int oversampling = 10;       // randomized path: extra sketch columns
   int power_iterations = 2;    // randomized path: subspace iterations
   std::uint64_t seed = 1;
@@ -42,17 +39,6 @@ struct PcaResult {
 
 // Components whose eigenvalue is below this fraction of the largest are dropped.
 inline constexpr double kNullEigenvalueFraction = 1e-10;
-
-// Whether the Gram (or covariance) path of the smaller side `small` costs fewer flops than the
-// randomized path with `rank` test vectors and `power_iterations`, per entry of the larger side
-// in float multiply-adds (a double one counts two): the Gram's lower triangle, small (small + 1)
-// / 2 double, against the randomized path's 2 q + 2 products with the test vectors (sketch, q
-// power iterations of two products, projection) and the Gram of the projection, rank (rank + 1)
-// / 2 double. What both paths do (centring, basis, scores) is left out; the eigen-decomposition
-// (small^3 against rank^3) is left out too, which favours the Gram path at large `small` where it
-// loses anyway. bench_compress BM_ClusterPca measures both paths around the crossover
-// (docs/btf-compress.md "Performance").
-bool GramCheaper(Eigen::Index small, Eigen::Index rank, int power_iterations);
 
 // X must be finite (callers check). n >= 1, d >= 1.
 PcaResult Pca(const Eigen::Ref<const RowMatrixXf>& X, const PcaRequest& request);
