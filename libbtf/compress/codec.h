@@ -98,9 +98,11 @@ struct CompressOptions {
   // more. When the sample is smaller than the texels, local-PCA rounds run on the sample alone
   // (mini-batch, in memory) before the rounds over all texels.
   int lpca_sample = 8192;
-  // Decomposition choice: Gram matrix of the smaller side (double) when min(n, d) <= this,
-  // randomized SVD (c + 10 oversampling, 2 power iterations) otherwise.
-  int gram_limit = 1024;
+  // LPCA's per-cluster decomposition: Gram matrix of the smaller side (double) when min(n, d) <=
+  // this, randomized SVD (c + 10 oversampling, 2 power iterations) otherwise. 256: the measured
+  // crossover at c = 8 (bench_compress BM_ClusterPca, docs/btf-compress.md "Performance"); the
+  // default was 1024 before 2026-12-03.
+  int gram_limit = 256;
   CodecStorage storage = CodecStorage::kFloat;  // coefficient storage (--storage float|half)
   std::optional<SceneSpec> scene;  // keep only what a scene needs (scene.h)
   void Check() const;
