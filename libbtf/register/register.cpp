@@ -740,7 +740,7 @@ class Registration {
   // R != N, the reference photos are rectified again at R x R for it and the lattice is scaled to
   // the N x N texels (x_N = (x_R + 0.5) N / R - 0.5).
   void EstimateReferenceLattice(int v, const std::map<int, const Image*>& by_light) {
-    const int N = o_.rectify.resolution, R = o_.lattice_resolution > 0 ? o_.lattice_resolution : N;
+    const int N = o_.rectify.resolution, R = o_.lattice_resolution > 0 ? o_.lattice_resolution : std::max(N, 128);
     std::map<int, const Image*> images = by_light;
     std::vector<Image> finer;
     if (R != N) {

@@ -46,9 +46,9 @@ struct RegisterOptions {
   std::string tile_output = "tiling";  // "tiling": N x N regular tiling; "tile": the averaged T x T tile
   LatticeOptions lattice;
   // Normtexture side on which the lattice is estimated (the reference view rectified again at
-  // this resolution, the lattice scaled to N); 0 = N. A finer one keeps the weave's harmonics
-  // from aliasing: at N = 64 the twill's 0.625 cycles/texel harmonic folds to 0.375 and the
-  // estimate is a wrong lattice; at 128 it is right (docs/btf-register.md, "Unit-tile reconstruction").
+  // this resolution, the lattice scaled to N); 0 = max(N, 128). A finer one keeps the weave's
+  // harmonics from aliasing: at N = 64 the twill's 0.625 cycles/texel harmonic folds to 0.375 and
+  // the estimate is a wrong lattice; at 128 it is right (docs/btf-register.md, "Unit-tile reconstruction").
   int lattice_resolution = 0;
   TileAverageOptions tiles;
   // With tile_average, how the unit tile is obtained: "average" (trimmed mean of the rectified

@@ -137,12 +137,12 @@ TEST(RegisterCli, MissingPairsAreFilledFromTheNearestLight) {
 // parallax): those texels are masked and counted, and without tile averaging they take the value
 // of the nearest unmasked texel.
 // --tile-method reconstruct end to end on the small photo set (two views, two lights, 640 x 480,
-// N = 32, the lattice estimated at 128 x 128): every photo reports its equations, and the dataset is
+// N = 32, the lattice estimated at 128 x 128, the default max(N, 128)): every photo reports its equations, and the dataset is
 // closer to the truth than the tile average's. A bad --tile-method is a usage error.
 TEST(RegisterCli, TileReconstructionReportsItsPixelsAndBeatsTheTileAverage) {
   const auto dir = test::TempDir();
   const std::string base = test::Tool("btf-register") + " run --quiet " + (PhotoSet() / "manifest.json").string() +
-                           " --resolution 32 --tile-average --lattice-resolution 128 ";
+                           " --resolution 32 --tile-average ";
   std::string out;
   ASSERT_EQ(test::RunCommand(base + "--tile-method reconstruct --report " + (dir / "r.json").string() + " -o " +
                                  (dir / "rec.h5").string(),

@@ -286,7 +286,7 @@ int main(int argc, char** argv) {
   cr->add_option("--tile-smoothness", ro.reconstruct.smoothness, "reconstruct: relative Laplacian (smoothness) weight");
   cr->add_option("--trim", ro.tiles.trim_fraction, "Trimmed-mean fraction dropped at each end when averaging tiles");
   cr->add_option("--lattice-resolution", ro.lattice_resolution,
-                 "With --tile-average: estimate the lattice on the reference view rectified at this side (0 = N)");
+                 "With --tile-average: estimate the lattice on the reference view rectified at this side (0 = max(N, 128))");
   cr->add_option("--max-yarns", ro.lattice.max_yarns_per_repeat, "Largest yarns-per-repeat searched (twill, satin)");
   cr->add_flag("--allow-missing", rf.allow_missing, "Exit 0 even if some photos fail (they are still reported)");
   cr->add_option("--truth", ro.truth, "truth.json (btf-synth photos): add errors against the truth to the report");
