@@ -192,8 +192,12 @@ ErrorStats CompressViewSlot(const SlotSource& in, int v, const std::vector<float
   auto sink = [&](Eigen::Index c0, const Eigen::Ref<const RowMatrixXf>& rec) {
     row.resize(static_cast<std::size_t>(rec.cols()));
     for (Eigen::Index l = 0; l < rec.rows(); ++l) {
-      for (Eigen::Index j = 0; j < rec.cols(); ++j) row[static_cast<std::size_t>(j)] = tr.Invert(rec(l, j));
-      e.Add(raw.data() + std::size_t(l) * D + std::size_t(c0), row.data(), row.size());
+      const float* x = rec.row(l).data();  // row-major: the row is contiguous
+      if (tr.log) {
+        for (Eigen::Index j = 0; j < rec.cols(); ++j) row[static_cast<std::size_t>(j)] = tr.Invert(x[j]);
+        x = row.data();
+      }
+      e.Add(raw.data() + std::size_t(l) * D + std::size_t(c0), x, static_cast<std::size_t>(rec.cols()));
     }
   };
   WidePcaResult r = WidePca(tr.log ? transformed.data() : raw.data(), L, static_cast<Eigen::Index>(D),
@@ -264,21 +268,28 @@ void CompressPcaView(const SlotSource& in, const CompressOptions& o, const Trans
   // one slot per thread.
   const int P = std::max(1, omp_get_max_threads());
   const bool ahead = !in.computes_slots();
-  auto read = [&](int first) {
-    std::vector<std::vector<float>> batch;
+  // Two sets of P slot buffers, allocated once (a fresh 64 MB slot per read costs its page
+  // faults and zeroing): one is decomposed while the next batch is read into the other.
+  std::vector<std::vector<float>> buffers[2];
+  auto read = [&](int first, std::vector<std::vector<float>>& batch) {
+    batch.resize(static_cast<std::size_t>(std::min(M, first + P) - first));
     for (int i = first; i < std::min(M, first + P); ++i) {
-      batch.emplace_back(n);
-      in.ReadViewSlot(mine[static_cast<std::size_t>(i)], batch.back().data());
+      auto& b = batch[static_cast<std::size_t>(i - first)];
+      b.resize(n);
+      in.ReadViewSlot(mine[static_cast<std::size_t>(i)], b.data());
     }
-    return batch;
   };
-  std::future<std::vector<std::vector<float>>> next;
-  if (ahead) next = std::async(std::launch::async, read, 0);
-  for (int first = 0; first < M; first += P) {
+  std::future<void> next;
+  if (ahead) next = std::async(std::launch::async, read, 0, std::ref(buffers[0]));
+  for (int first = 0, set = 0; first < M; first += P, set ^= 1) {
     rep.Progress(std::size_t(first), std::size_t(M), "pca-view");
     t.Restart();
-    std::vector<std::vector<float>> raw = ahead ? next.get() : read(first);
-    if (ahead && first + P < M) next = std::async(std::launch::async, read, first + P);
+    if (ahead)
+      next.get();
+    else
+      read(first, buffers[set]);
+    const std::vector<std::vector<float>>& raw = buffers[set];
+    if (ahead && first + P < M) next = std::async(std::launch::async, read, first + P, std::ref(buffers[set ^ 1]));
     sum.times.Add("read", t.Seconds());
     t.Restart();
     const int count = static_cast<int>(raw.size());

@@ -225,13 +225,16 @@ WidePcaResult WidePca(const float* X, Eigen::Index n, Eigen::Index d, const PcaR
   MatrixXd G = MatrixXd::Zero(n, n);
   TileD T(n, kWideTile);
   std::vector<double> colsum(static_cast<std::size_t>(kWideTile)), colsq(static_cast<std::size_t>(kWideTile));
-  // Loads columns [c0, c0 + w) centred by the stored (float) mean into T.
-  auto load_centred = [&](Eigen::Index c0, Eigen::Index w) {
+  // Loads columns [c0, c0 + w) centred by the stored (float) mean into T; with `sq`, adds each
+  // column's centred sum of squares to sq[j] (per column: no serial chain across the tile).
+  auto load_centred = [&](Eigen::Index c0, Eigen::Index w, double* sq) {
     const float* m = r.mean.data() + c0;
     for (Eigen::Index i = 0; i < n; ++i) {
       const float* row = X + i * d + c0;
       double* t = T.row(i).data();
       for (Eigen::Index j = 0; j < w; ++j) t[j] = double(row[j]) - double(m[j]);
+      if (sq)
+        for (Eigen::Index j = 0; j < w; ++j) sq[j] += t[j] * t[j];
     }
   };
   // Pass 1: check, mean, centre, Gram; energies in double. Sums per column (no serial chain
@@ -266,10 +269,10 @@ WidePcaResult WidePca(const float* X, Eigen::Index n, Eigen::Index d, const PcaR
       float m = static_cast<float>(colsum[static_cast<std::size_t>(j)] / double(n));
       r.mean[static_cast<std::size_t>(c0 + j)] = half ? RoundToHalf(m) : m;
     }
-    load_centred(c0, w);
-    const auto Tw = T.leftCols(w);
-    centred += Tw.squaredNorm();
-    G.selfadjointView<Eigen::Lower>().rankUpdate(Tw);
+    std::fill(colsq.begin(), colsq.end(), 0.0);
+    load_centred(c0, w, colsq.data());
+    for (Eigen::Index j = 0; j < w; ++j) centred += colsq[static_cast<std::size_t>(j)];
+    G.selfadjointView<Eigen::Lower>().rankUpdate(T.leftCols(w));
   }
   r.total_energy = total;
   r.centered_energy = centred;
@@ -309,7 +312,7 @@ WidePcaResult WidePca(const float* X, Eigen::Index n, Eigen::Index d, const PcaR
   for (Eigen::Index c0 = 0; c0 < d && (c > 0 || sink); c0 += kWideTile) {
     const Eigen::Index w = std::min(kWideTile, d - c0);
     if (c > 0) {
-      load_centred(c0, w);
+      load_centred(c0, w, nullptr);
       Bd.leftCols(w).noalias() = S * T.leftCols(w);
       Bf.leftCols(w) = Bd.leftCols(w).cast<float>();
       if (half) Bf.leftCols(w) = Bf.leftCols(w).unaryExpr([](float x) { return RoundToHalf(x); });
