@@ -310,8 +310,8 @@ std::unique_ptr<btf::SlotSource> OpenCompressInput(const std::filesystem::path& 
 py::object Compress(const std::filesystem::path& input, const std::filesystem::path& output, const std::string& method,
                     int components, int clusters, double error, double energy, std::uint64_t bytes,
                     const std::string& storage, int quant_bits, double tensor_growth, std::uint64_t seed, bool log,
-                    double log_epsilon, int max_iterations, double min_improvement,
-                    const std::optional<std::filesystem::path>& scene, const std::optional<py::function>& progress) {
+                    double log_epsilon, int max_iterations, double min_improvement, const std::string& lpca_memory,
+                    int lpca_sample, const std::optional<std::filesystem::path>& scene, const std::optional<py::function>& progress) {
   btf::CompressOptions o;
   o.method = btf::ParseMethod(method);
   o.components = components;
@@ -327,6 +327,8 @@ py::object Compress(const std::filesystem::path& input, const std::filesystem::p
   o.log_epsilon = log_epsilon;
   o.max_iterations = max_iterations;
   o.min_improvement = min_improvement;
+  o.lpca_memory = lpca_memory;
+  o.lpca_sample = lpca_sample;
   if (scene) o.scene = btf::SceneSpec::Load(*scene);
   o.Check();
   // As btf-compress: claim the output first, so an unwritable folder fails before the work.
@@ -444,6 +446,7 @@ PYBIND11_MODULE(libbtf, m) {
         py::arg("bytes") = co.max_bytes, py::arg("storage") = btf::StorageName(co.storage),
         py::arg("quant_bits") = co.quant_bits, py::arg("tensor_growth") = co.tensor_growth, py::arg("seed") = co.seed, py::arg("log") = co.log_transform, py::arg("log_epsilon") = co.log_epsilon,
         py::arg("max_iterations") = co.max_iterations, py::arg("min_improvement") = co.min_improvement,
+        py::arg("lpca_memory") = co.lpca_memory, py::arg("lpca_sample") = co.lpca_sample,
         py::arg("scene") = py::none(), py::arg("progress") = py::none(),
         "btf-compress INPUT -o OUTPUT with the same options; returns its --json summary as a dict");
 
