@@ -3,7 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
-#include <future>
+#include <atomic>
+#include <mutex>
 #include <limits>
 #include <numeric>
 #include <random>
@@ -261,54 +262,48 @@ void CompressPcaView(const SlotSource& in, const CompressOptions& o, const Trans
   std::vector<ErrorStats> slot_err(static_cast<std::size_t>(V));
   std::vector<int> slot_dropped(static_cast<std::size_t>(V), 0);
   Timer t;
-  // Slots are decomposed P at a time, one per thread (coarse-grained parallelism: no barrier
-  // per small GEMM, robust when the cores are shared), while the next P slots are read on
-  // another thread (HDF5 is only ever called from one thread at a time). A source that computes
-  // its slots (a factorised file) has no I/O to overlap: it is read in turn, so that memory is
-  // one slot per thread.
-  const int P = std::max(1, omp_get_max_threads());
-  const bool ahead = !in.computes_slots();
-  // Two sets of P slot buffers, allocated once (a fresh 64 MB slot per read costs its page
-  // faults and zeroing): one is decomposed while the next batch is read into the other.
-  std::vector<std::vector<float>> buffers[2];
-  auto read = [&](int first, std::vector<std::vector<float>>& batch) {
-    batch.resize(static_cast<std::size_t>(std::min(M, first + P) - first));
-    for (int i = first; i < std::min(M, first + P); ++i) {
-      auto& b = batch[static_cast<std::size_t>(i - first)];
-      b.resize(n);
-      in.ReadViewSlot(mine[static_cast<std::size_t>(i)], b.data());
-    }
-  };
-  std::future<void> next;
-  if (ahead) next = std::async(std::launch::async, read, 0, std::ref(buffers[0]));
-  for (int first = 0, set = 0; first < M; first += P, set ^= 1) {
-    rep.Progress(std::size_t(first), std::size_t(M), "pca-view");
-    t.Restart();
-    if (ahead)
-      next.get();
-    else
-      read(first, buffers[set]);
-    const std::vector<std::vector<float>>& raw = buffers[set];
-    if (ahead && first + P < M) next = std::async(std::launch::async, read, first + P, std::ref(buffers[set ^ 1]));
-    sum.times.Add("read", t.Seconds());
-    t.Restart();
-    const int count = static_cast<int>(raw.size());
-    std::vector<std::exception_ptr> failures(static_cast<std::size_t>(count));
-#pragma omp parallel for schedule(static, 1) num_threads(count)
-    for (int b = 0; b < count; ++b) {
-      const std::size_t i = static_cast<std::size_t>(b), v = static_cast<std::size_t>(mine[std::size_t(first + b)]);
-      omp_set_num_threads(1);  // Eigen sequential in this slot's task, also when the batch has one slot
+  // One slot per thread at a time (coarse-grained parallelism: no barrier per small GEMM, robust
+  // when the cores are shared), taken in turn from a shared counter; each thread reads its slot
+  // itself, one thread at a time (HDF5 is never called concurrently), so one thread reads and
+  // inflates while the other decomposes, on the same cores and without a reader thread of its
+  // own. A slot's result does not depend on the thread that computes it. The first thread (the
+  // caller's) reports progress after each of its slots.
+  const int P = std::max(1, std::min(omp_get_max_threads(), M));
+  std::mutex reading;
+  std::atomic<int> next{0}, done{0};
+  std::atomic<bool> stop{false};
+  std::vector<std::exception_ptr> failures(static_cast<std::size_t>(M));
+  std::exception_ptr cancelled;
+#pragma omp parallel num_threads(P)
+  {
+    omp_set_num_threads(1);  // Eigen and the reader's inflate sequential in this thread
+    std::vector<float> raw(n);
+    for (int i = next++; i < M && !stop; i = next++) {
+      const int v = mine[static_cast<std::size_t>(i)];
       try {
-        slot_err[v] = CompressViewSlot(in, int(v), raw[i], o, tr, slots[v], &slot_dropped[v]);
+        {
+          const std::lock_guard<std::mutex> lock(reading);
+          in.ReadViewSlot(v, raw.data());
+        }
+        const std::size_t u = static_cast<std::size_t>(v);
+        slot_err[u] = CompressViewSlot(in, v, raw, o, tr, slots[u], &slot_dropped[u]);
       } catch (...) {
-        failures[i] = std::current_exception();
+        failures[static_cast<std::size_t>(i)] = std::current_exception();
+        stop = true;
       }
+      const int finished = ++done;
+      if (omp_get_thread_num() == 0 && !stop) try {
+          rep.Progress(std::size_t(finished), std::size_t(M), "pca-view");
+        } catch (...) {
+          cancelled = std::current_exception();
+          stop = true;
+        }
     }
-    for (const auto& f : failures)
-      if (f) std::rethrow_exception(f);
-    sum.times.Add("decompose", t.Seconds());
   }
-  if (ahead && M == 0) next.get();
+  for (const auto& f : failures)  // the first failed slot in order, whichever thread saw it first
+    if (f) std::rethrow_exception(f);
+  if (cancelled) std::rethrow_exception(cancelled);
+  sum.times.Add("read+decompose", t.Seconds());
   rep.Progress(std::size_t(M), std::size_t(M), "pca-view");
   if (dist::Distributed()) {
     t.Restart();
