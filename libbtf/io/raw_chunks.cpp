@@ -18,17 +18,25 @@ namespace btf::h5 {
 static_assert(std::endian::native == std::endian::little, "raw chunks hold little-endian values, copied as they are");
 
 std::uint32_t Fletcher32(const std::uint8_t* data, std::size_t size) {
-  std::uint32_t sum1 = 0, sum2 = 0;
-  const auto fold = [](std::uint32_t s) { return (s & 0xffffu) + (s >> 16); };
+  // HDF5 adds word by word (sum1 += w; sum2 += sum1) and folds both sums every 360 words, the
+  // block after which its 32-bit sums could overflow; they never do, so the exact sums of a
+  // block give the same values: sum1 += sum w_i, sum2 += block * sum1 + sum (block - i) w_i. The
+  // two per-block sums have no chain from word to word (vectorised) and stay below 2^32
+  // (65535 * 360 * 361 / 2 < 2^32).
+  std::uint64_t sum1 = 0, sum2 = 0;
+  const auto fold = [](std::uint64_t s) { return (s & 0xffffu) + (s >> 16); };
   for (std::size_t words = size / 2; words > 0;) {
-    const std::size_t block = std::min<std::size_t>(words, 360);  // HDF5's block: the same 32-bit sums
+    const auto block = static_cast<std::uint32_t>(std::min<std::size_t>(words, 360));
     words -= block;
-    for (std::size_t i = 0; i < block; ++i, data += 2) {
-      sum1 += (std::uint32_t(data[0]) << 8) | data[1];
-      sum2 += sum1;
+    std::uint32_t s1 = 0, s2 = 0;
+    for (std::uint32_t i = 0; i < block; ++i) {
+      const std::uint32_t w = (std::uint32_t(data[2 * i]) << 8) | data[2 * i + 1];
+      s1 += w;
+      s2 += (block - i) * w;
     }
-    sum1 = fold(sum1);
-    sum2 = fold(sum2);
+    data += 2 * std::size_t(block);
+    sum2 = fold(sum2 + std::uint64_t(block) * sum1 + s2);
+    sum1 = fold(sum1 + s1);
   }
   if (size % 2) {
     sum1 += std::uint32_t(data[0]) << 8;
@@ -36,7 +44,7 @@ std::uint32_t Fletcher32(const std::uint8_t* data, std::size_t size) {
     sum1 = fold(sum1);
     sum2 = fold(sum2);
   }
-  return (fold(sum2) << 16) | fold(sum1);
+  return static_cast<std::uint32_t>((fold(sum2) << 16) | fold(sum1));
 }
 
 namespace {

@@ -132,6 +132,32 @@ TEST(RawChunks, StoredChecksumIsHdf5sFletcher32OfTheChunk) {
   EXPECT_EQ(h5::Fletcher32(text, 5), 0x4ff029c7u);
 }
 
+// HDF5's loop, word by word in 32-bit sums folded every 360 words, against the blocked sums
+// Fletcher32 forms: equal on random bytes of every length around the block size and on all-0xff
+// bytes (the largest sums).
+TEST(RawChunks, BlockedFletcher32EqualsHdf5sWordByWordLoop) {
+  const auto serial = [](const std::uint8_t* d, std::size_t size) {
+    std::uint32_t s1 = 0, s2 = 0;
+    const auto fold = [](std::uint32_t s) { return (s & 0xffffu) + (s >> 16); };
+    for (std::size_t words = size / 2; words > 0;) {
+      const std::size_t block = std::min<std::size_t>(words, 360);
+      words -= block;
+      for (std::size_t i = 0; i < block; ++i, d += 2) s1 += (std::uint32_t(d[0]) << 8) | d[1], s2 += s1;
+      s1 = fold(s1), s2 = fold(s2);
+    }
+    if (size % 2) s1 += std::uint32_t(d[0]) << 8, s2 += s1, s1 = fold(s1), s2 = fold(s2);
+    return (fold(s2) << 16) | fold(s1);
+  };
+  std::mt19937 rng(5);
+  std::vector<std::uint8_t> bytes(5000);
+  for (auto& b : bytes) b = static_cast<std::uint8_t>(rng());
+  const std::vector<std::uint8_t> ones(5000, 0xff);
+  for (std::size_t n : {0u, 1u, 2u, 719u, 720u, 721u, 722u, 1441u, 4999u, 5000u}) {
+    EXPECT_EQ(h5::Fletcher32(bytes.data(), n), serial(bytes.data(), n)) << n;
+    EXPECT_EQ(h5::Fletcher32(ones.data(), n), serial(ones.data(), n)) << n;
+  }
+}
+
 // Replaces /btf/data of a written dataset by the same values under another dataset creation
 // property list (layout, filters) and file type, written with H5Dwrite.
 void Restore(const std::filesystem::path& path, const Dataset& d, const std::function<void(hid_t dcpl)>& setup,
