@@ -205,10 +205,11 @@ float RoundToHalf(float x) { return HalfToFloat(FloatToHalf(x)); }
 void NormalizeSigns(float* basis, Eigen::Index c, Eigen::Index d, float* weights, Eigen::Index n) {
   for (Eigen::Index k = 0; k < c; ++k) {
     const float* row = basis + k * d;
-    float best = 0;
+    if (d == 0) continue;
+    // The largest magnitude (vectorised), then the first entry that has it.
+    const float best = Eigen::Map<const Eigen::ArrayXf>(row, d).abs().maxCoeff();
     Eigen::Index arg = 0;
-    for (Eigen::Index i = 0; i < d; ++i)
-      if (std::abs(row[i]) > best) best = std::abs(row[i]), arg = i;
+    while (arg + 1 < d && std::abs(row[arg]) != best) ++arg;
     if (!(row[arg] < 0)) continue;
     for (Eigen::Index i = 0; i < d; ++i) basis[k * d + i] = -basis[k * d + i];
     for (Eigen::Index l = 0; l < n; ++l) weights[l * c + k] = -weights[l * c + k];
