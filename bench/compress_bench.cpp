@@ -226,7 +226,7 @@ void BM_Lpca(benchmark::State& st) {
   if (is_default) g_lpca_seconds = s.times.Total();
 }
 // Args: max_iterations, gram_limit, warm start (CompressOptions::lpca_warm_start). Before (every
-// cluster's PCA from a Gaussian sketch) first, then the default, whose codec the decode
+// randomized cluster fit from a Gaussian sketch) first, then the default, whose codec the decode
 // benchmarks use.
 BENCHMARK(BM_Lpca)->Args({20, 256, 0})->Args({20, 256, 1})->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 
