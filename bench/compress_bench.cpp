@@ -203,6 +203,7 @@ void BM_Lpca(benchmark::State& st) {
   o.components = 8;
   o.max_iterations = static_cast<int>(st.range(0));
   o.gram_limit = static_cast<int>(st.range(1));
+  o.lpca_warm_start = st.range(2) != 0;
   btf::CompressSummary s;
   const auto source = btf::MemorySource(d);
   for (auto _ : st) {
@@ -210,7 +211,10 @@ void BM_Lpca(benchmark::State& st) {
     s = btf::Compress(o, *source, LpcaCodec().get());
   }
   SetSizeCounters(st);
-  st.SetLabel("gram_limit " + std::to_string(o.gram_limit) + (o.gram_limit == btf::CompressOptions{}.gram_limit ? " (default)" : " (before)"));
+  const btf::CompressOptions defaults;
+  const bool is_default = o.gram_limit == defaults.gram_limit && o.lpca_warm_start == defaults.lpca_warm_start;
+  st.SetLabel("gram_limit " + std::to_string(o.gram_limit) + (o.lpca_warm_start ? ", warm start" : ", cold start") +
+              (is_default ? " (default)" : " (before)"));
   for (const auto& [name, sec] : s.times.phases()) st.counters[name + "_s"] = sec;
   st.counters["rounds"] = double(s.iteration_errors.size());
   st.counters["relative_error"] = s.relative_error;
@@ -219,40 +223,48 @@ void BM_Lpca(benchmark::State& st) {
   st.counters["ratio_vs_half"] = s.ratio_half;
   // Reassignment GEMM: N x d x K (c + 1) multiply-adds per round; its share is reported by the
   // kernel benchmark below.
-  if (o.gram_limit == btf::CompressOptions{}.gram_limit) g_lpca_seconds = s.times.Total();
+  if (is_default) g_lpca_seconds = s.times.Total();
 }
-// Args: max_iterations, gram_limit. The limit of before (Gram for clusters of <= 1024 texels)
-// first, then the default (256), whose codec the decode benchmarks use.
-BENCHMARK(BM_Lpca)->Args({20, 1024})->Args({20, 256})->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
+// Args: max_iterations, gram_limit, warm start (CompressOptions::lpca_warm_start). Before (every
+// randomized cluster fit from a Gaussian sketch) first, then the default, whose codec the decode
+// benchmarks use.
+BENCHMARK(BM_Lpca)->Args({20, 256, 0})->Args({20, 256, 1})->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 
 // One cluster's PCA (n texels' ABRDFs, 81 x 81 x 3 values; c = 8 as BM_Lpca) on one thread, by
-// either path: Arg 1: n, Arg 2: 0 Gram (double), 1 randomized (18 test vectors, 2 power
-// iterations): where the Gram path stops being the faster one (CompressOptions::gram_limit).
-// relative_residual: the residual energy over the centred energy (the randomized path's
-// approximation shows as a larger value).
+// one path: Arg 1: n, Arg 2: 0 Gram (double), 1 randomized (18 test vectors, 2 power iterations),
+// 2 randomized warm-started (LPCA's refits, CompressOptions::lpca_warm_start) from the basis of a
+// neighbouring cluster: the n texels half a step further along the image (other texels of the
+// same materials), fitted by path 1 outside the timing. relative_residual: the residual energy
+// over the centred energy (an approximate path shows as a larger value).
 void BM_ClusterPca(benchmark::State& st) {
   const auto& d = Data();
   const Eigen::Index n = std::min<Eigen::Index>(st.range(0), static_cast<Eigen::Index>(d.num_texels()));
   const Eigen::Index dim = static_cast<Eigen::Index>(d.abrdf_size());
-  RowMatrixXf X(n, dim);
-  for (Eigen::Index i = 0; i < n; ++i) {  // texels spread over the image: several materials
-    const std::size_t t = std::size_t(i) * d.num_texels() / std::size_t(n);
-    const auto a = d.Abrdf(static_cast<int>(t / d.width()), static_cast<int>(t % d.width()));
-    X.row(i) = Eigen::Map<const Eigen::RowVectorXf>(a.data(), dim);
-  }
+  // Texels spread over the image (several materials), starting at `offset` of a step.
+  auto rows = [&](double offset) {
+    RowMatrixXf X(n, dim);
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const std::size_t t = std::size_t((double(i) + offset) * double(d.num_texels()) / double(n));
+      const auto a = d.Abrdf(static_cast<int>(t / d.width()), static_cast<int>(t % d.width()));
+      X.row(i) = Eigen::Map<const Eigen::RowVectorXf>(a.data(), dim);
+    }
+    return X;
+  };
+  const RowMatrixXf X = rows(0);
   btf::PcaRequest q;
   q.max_components = 8;
   q.gram_limit = st.range(1) ? 1 : static_cast<int>(n);
   const int before = omp_get_max_threads();
   omp_set_num_threads(1);
+  const btf::PcaResult start = st.range(1) == 2 ? btf::Pca(rows(0.5), q) : btf::PcaResult{};
   btf::PcaResult r;
-  for (auto _ : st) r = btf::Pca(X, q);
+  for (auto _ : st) r = btf::Pca(X, q, st.range(1) == 2 ? &start.basis : nullptr);
   omp_set_num_threads(before);
-  st.SetLabel(r.randomized ? "randomized" : "Gram");
+  st.SetLabel(!r.randomized ? "Gram" : st.range(1) == 2 ? "randomized, warm" : "randomized");
   st.counters["relative_residual"] = r.residual_energy / r.centered_energy;
 }
 BENCHMARK(BM_ClusterPca)
-    ->ArgsProduct({{64, 128, 256, 512}, {0, 1}})
+    ->ArgsProduct({{64, 128, 256, 512}, {0, 1, 2}})
     ->Unit(benchmark::kMillisecond)
     ->MinTime(0.5)
     ->UseRealTime();

@@ -109,7 +109,7 @@ nlohmann::json CompressOptions::ToJson() const {
           {"log_transform", log_transform}, {"log_epsilon", log_epsilon},
           {"max_iterations", max_iterations}, {"min_improvement", min_improvement}, {"lpca_memory", lpca_memory},
           {"lpca_sample", lpca_sample},
-          {"gram_limit", gram_limit},       {"storage", StorageName(storage)},
+          {"gram_limit", gram_limit},       {"lpca_warm_start", lpca_warm_start},       {"storage", StorageName(storage)},
           {"max_bytes", max_bytes},         {"quant_bits", quant_bits},
           {"tensor_growth", tensor_growth}};
 }

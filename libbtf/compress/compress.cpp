@@ -453,9 +453,7 @@ class LpcaCompressor {
       ReadTexelMajor();
     }
     sum_.times.Add("read", t.Seconds());
-    t.Restart();
     ClusterFit fit = InitialClustering();
-    sum_.times.Add("cluster", t.Seconds());
     t.Restart();
     Iterate(fit);
     sum_.times.Add("iterate", t.Seconds());
@@ -664,9 +662,14 @@ class LpcaCompressor {
     int rounds = 0;
     std::vector<PcaResult> models;  // mini-batch: the sample rounds' per-cluster models (no scores)
     std::vector<double> sample_errors;
+    // Phases: kmeans (the sample, seeds and Lloyd; on ranks other than 0 also the wait for rank 0's
+    // sample rounds), sample_rounds, first_fit (the first assignment of all texels and their PCA).
+    Timer t;
+    double kmeans_s = 0;
     auto on_sample = [&](const RowMatrixXf& M, const double* norms, const std::vector<std::size_t>& rows) {
       std::vector<std::int32_t> assign;
       rounds = Lloyd(M, norms, rows, rng, centers, assign);
+      kmeans_s = t.Seconds();
       if (mini_batch) models = SampleRounds(M, norms, rows, std::move(assign), sample_errors);
     };
     if (R_ == 1 && !ooc_) {
@@ -694,6 +697,10 @@ class LpcaCompressor {
                             .GetVector<double>();
       }
     }
+    if (kmeans_s == 0) kmeans_s = t.Seconds();
+    sum_.times.Add("kmeans", kmeans_s);
+    if (mini_batch) sum_.times.Add("sample_rounds", t.Seconds() - kmeans_s);
+    t.Restart();
     ClusterFit fit;
     if (mini_batch) {
       fit.assign.assign(N_, 0);
@@ -704,7 +711,8 @@ class LpcaCompressor {
       fit.assign = R_ > 1 ? dist::AllGatherConcat(mine) : std::move(mine);
     }
     BTF_CHECK(fit.assign.size() == N_);
-    FitClusters(fit, mini_batch);
+    FitClusters(fit, mini_batch, nullptr, mini_batch ? &models : nullptr);
+    sum_.times.Add("first_fit", t.Seconds());
     sum_.sample_errors = sample_errors;
     sum_.iteration_errors.push_back(fit.error);
     sum_.iteration_changes.push_back(0);
@@ -769,7 +777,7 @@ class LpcaCompressor {
       const auto& m = members[static_cast<std::size_t>(k)];
       RowMatrixXf x(static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d_));
       for (std::size_t i = 0; i < m.size(); ++i) x.row(Eigen::Index(i)) = M.row(static_cast<Eigen::Index>(rows[m[i]]));
-      PcaResult p = Pca(x, MakeRequest(o_, std::uint64_t(k)));
+      PcaResult p = PcaInPlace(x, MakeRequest(o_, std::uint64_t(k)), WarmStart(prev ? &prev->pca : nullptr, k));
       p.scores.resize(0, 0);
       f.pca[static_cast<std::size_t>(k)] = std::move(p);
     }
@@ -929,8 +937,9 @@ class LpcaCompressor {
 
   // Per-cluster PCA on the current assignment; empty clusters re-seeded from the worst texels. A
   // cluster whose members are those it had in `prev` keeps prev's PCA (the same rows in the same
-  // order with the same seed: the PCA it would compute again).
-  void FitClusters(ClusterFit& f, bool have_residuals, const ClusterFit* prev = nullptr) {
+  // order: its fit). warm (with o_.lpca_warm_start): per cluster, the model whose basis starts its
+  // PCA (Pca's `start`; none where it has no components).
+  void FitClusters(ClusterFit& f, bool have_residuals, const ClusterFit* prev, const std::vector<PcaResult>* warm) {
     std::vector<std::vector<std::size_t>> members = MembersFillingEmpty(f.assign, K_, have_residuals ? residual_.data() : nullptr);
     f.pca.assign(static_cast<std::size_t>(K_), PcaResult{});
     // Largest first (one cluster per thread, Eigen single-threaded inside the region); the
@@ -1032,7 +1041,7 @@ class LpcaCompressor {
         if (x.rows() == 0) x.resize(static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d_));
         for (std::size_t i = 0; i < m.size() && !ooc_; ++i)
           if (m[i] >= t0_ && m[i] < t1_) x.row(Eigen::Index(i)) = A_.row(static_cast<Eigen::Index>(m[i] - t0_));
-        f.pca[static_cast<std::size_t>(k)] = Pca(x, MakeRequest(o_, std::uint64_t(k)));
+        f.pca[static_cast<std::size_t>(k)] = PcaInPlace(x, MakeRequest(o_, std::uint64_t(k)), WarmStart(warm, k));
         x.resize(0, 0);
       }
     }
@@ -1048,6 +1057,13 @@ class LpcaCompressor {
     for (const PcaResult& p : f.pca) res += p.residual_energy;
     f.error = total_ > 0 ? std::sqrt(res / total_) : 0;
     f.members = std::move(members);
+  }
+
+  // The basis that starts cluster k's PCA (FitClusters' `warm`), or none.
+  const RowMatrixXf* WarmStart(const std::vector<PcaResult>* warm, int k) const {
+    if (!o_.lpca_warm_start || !warm) return nullptr;
+    const PcaResult& p = (*warm)[static_cast<std::size_t>(k)];
+    return p.components() > 0 ? &p.basis : nullptr;
   }
 
   // Out of core: X[k] = the member rows (texel order) of clusters list[first, last), one pass.
@@ -1108,7 +1124,7 @@ class LpcaCompressor {
       ClusterFit next{{}, fit.assign, 0, {}};
       const std::size_t moved = Reassign(fit.pca, next.assign);
       if (moved == 0) break;
-      FitClusters(next, true, &fit);
+      FitClusters(next, true, &fit, &fit.pca);
       sum_.iteration_errors.push_back(next.error);
       sum_.iteration_changes.push_back(static_cast<int>(moved));
       rep_.Info("lpca: iteration {}: {} texels reassigned, relative error {:.5f}", it + 1, moved, next.error);

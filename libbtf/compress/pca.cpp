@@ -17,8 +17,8 @@ namespace {
 using MatrixXd = Eigen::MatrixXd;
 constexpr Eigen::Index kBlock = 2048;  // columns/rows per double block (fits L2 with n <= 256)
 
-// Mean (double accumulation) and centered copy; energies in double.
-void Center(const Eigen::Ref<const RowMatrixXf>& X, PcaResult& r, RowMatrixXf& Xc) {
+// Mean (double accumulation) and total energy of X's rows.
+void Moments(const Eigen::Ref<const RowMatrixXf>& X, PcaResult& r) {
   const Eigen::Index n = X.rows(), d = X.cols();
   Eigen::VectorXd mean = Eigen::VectorXd::Zero(d);
   double total = 0;
@@ -30,10 +30,24 @@ void Center(const Eigen::Ref<const RowMatrixXf>& X, PcaResult& r, RowMatrixXf& X
   mean /= double(n);
   r.mean = mean.cast<float>();
   r.total_energy = total;
-  Xc = X.rowwise() - r.mean.transpose();
+}
+
+// Xc = X - mean, row by row (Xc may be X: centred in place), and the centred energy (double),
+// each row's norm taken while it is in cache.
+void CentreRows(const Eigen::Ref<const RowMatrixXf>& X, PcaResult& r, RowMatrixXf& Xc) {
+  if (Xc.data() != X.data()) Xc.resize(X.rows(), X.cols());
   double centered = 0;
-  for (Eigen::Index i = 0; i < n; ++i) centered += Xc.row(i).cast<double>().squaredNorm();
+  for (Eigen::Index i = 0; i < X.rows(); ++i) {
+    Xc.row(i) = X.row(i) - r.mean.transpose();
+    centered += Xc.row(i).cast<double>().squaredNorm();
+  }
   r.centered_energy = centered;
+}
+
+// Mean and centred copy; energies in double.
+void Center(const Eigen::Ref<const RowMatrixXf>& X, PcaResult& r, RowMatrixXf& Xc) {
+  Moments(X, r);
+  CentreRows(X, r, Xc);
 }
 
 // Number of components to keep from eigenvalues sorted in decreasing order.
@@ -106,13 +120,9 @@ void Finish(const RowMatrixXf& Xc, PcaResult& r) {
   NormalizeSigns(r.basis.data(), r.basis.rows(), r.basis.cols(), r.scores.data(), r.scores.rows());
 }
 
-}  // namespace
-
-PcaResult Pca(const Eigen::Ref<const RowMatrixXf>& X, const PcaRequest& q) {
-  PcaResult r;
-  const Eigen::Index n = X.rows(), d = X.cols();
-  RowMatrixXf Xc;
-  Center(X, r, Xc);
+// Pca on the centred rows Xc; r holds the mean and energies.
+PcaResult PcaOfCentred(const RowMatrixXf& Xc, PcaResult r, const PcaRequest& q, const RowMatrixXf* start) {
+  const Eigen::Index n = Xc.rows(), d = Xc.cols();
   r.requested = q.max_components;
   // n observations span at most n - 1 centered directions.
   const int limit = static_cast<int>(std::min<Eigen::Index>(n - 1, d));
@@ -120,6 +130,7 @@ PcaResult Pca(const Eigen::Ref<const RowMatrixXf>& X, const PcaRequest& q) {
   const Eigen::Index small = std::min(n, d);
   const int want = std::min(q.max_components, limit);
   const bool gram = small <= q.gram_limit || 2 * (want + q.oversampling) >= small;
+  const bool warm = !gram && start && start->rows() > 0 && start->cols() == d;
   std::vector<double> eig;
   if (want <= 0 || r.centered_energy <= 0) {
     r.basis.resize(0, d);
@@ -157,11 +168,13 @@ PcaResult Pca(const Eigen::Ref<const RowMatrixXf>& X, const PcaRequest& q) {
     std::mt19937_64 rng(q.seed);
     std::normal_distribution<float> normal(0.0f, 1.0f);
     Eigen::MatrixXf omega(d, rank);
-    for (Eigen::Index j = 0; j < rank; ++j)
+    const Eigen::Index warm_cols = warm ? std::min(start->rows(), rank) : 0;
+    if (warm_cols > 0) omega.leftCols(warm_cols) = start->topRows(warm_cols).transpose();
+    for (Eigen::Index j = warm_cols; j < rank; ++j)
       for (Eigen::Index i = 0; i < d; ++i) omega(i, j) = normal(rng);
     Eigen::MatrixXf Y = Xc * omega;
     MatrixXd Q = Orth(Y);
-    for (int it = 0; it < q.power_iterations; ++it) {
+    for (int it = 0; it < (warm ? q.warm_power_iterations : q.power_iterations); ++it) {
       const Eigen::MatrixXf Z = Xc.transpose() * Q.cast<float>();
       const MatrixXd Qz = Orth(Z);
       Y.noalias() = Xc * Qz.cast<float>();
@@ -183,6 +196,22 @@ PcaResult Pca(const Eigen::Ref<const RowMatrixXf>& X, const PcaRequest& q) {
   r.eigenvalues.assign(static_cast<std::size_t>(r.basis.rows()), 0.0);
   Finish(Xc, r);
   return r;
+}
+
+}  // namespace
+
+PcaResult Pca(const Eigen::Ref<const RowMatrixXf>& X, const PcaRequest& q, const RowMatrixXf* start) {
+  RowMatrixXf Xc;
+  PcaResult r;
+  Center(X, r, Xc);
+  return PcaOfCentred(Xc, std::move(r), q, start);
+}
+
+PcaResult PcaInPlace(RowMatrixXf& X, const PcaRequest& q, const RowMatrixXf* start) {
+  PcaResult r;
+  Moments(X, r);
+  CentreRows(X, r, X);
+  return PcaOfCentred(X, std::move(r), q, start);
 }
 
 PcaResult PcaFullSvd(const Eigen::Ref<const RowMatrixXf>& X, int components) {

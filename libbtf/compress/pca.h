@@ -19,6 +19,9 @@ struct PcaRequest {
   int gram_limit = 256;        // Gram/covariance path when min(n, d) <= gram_limit
   int oversampling = 10;       // randomized path: extra sketch columns
   int power_iterations = 2;    // randomized path: subspace iterations
+  // Randomized path started from a previous basis (Pca's `start`): subspace iterations after the
+  // first product X_c V0 (1: 5 passes over X instead of 7).
+  int warm_power_iterations = 1;
   std::uint64_t seed = 1;
 };
 
@@ -41,7 +44,13 @@ struct PcaResult {
 inline constexpr double kNullEigenvalueFraction = 1e-10;
 
 // X must be finite (callers check). n >= 1, d >= 1.
-PcaResult Pca(const Eigen::Ref<const RowMatrixXf>& X, const PcaRequest& request);
+// start (optional, s x d rows, e.g. the basis of a previous fit to similar rows): a warm start
+// for the randomized path (where the shape takes it; the Gram path ignores start): its test
+// matrix V0 is start's rows followed by Gaussian columns up to c + oversampling, with
+// warm_power_iterations subspace iterations instead of power_iterations.
+PcaResult Pca(const Eigen::Ref<const RowMatrixXf>& X, const PcaRequest& request, const RowMatrixXf* start = nullptr);
+// The same result, without a centred copy: X is centred in place (X - mean on return).
+PcaResult PcaInPlace(RowMatrixXf& X, const PcaRequest& request, const RowMatrixXf* start = nullptr);
 
 // The straightforward reference: full SVD (Eigen::BDCSVD) of the centered matrix, first c
 // components, no shape-dependent choice (benchmarks and tests compare against it).

@@ -151,6 +151,14 @@ TEST(Determinism, OneAndTwoThreadsGiveIdenticalCodecs) {
   EXPECT_EQ(s1.iteration_errors, s2.iteration_errors);
   EXPECT_EQ(s1.relative_error, s2.relative_error);
   EXPECT_GE(s1.sample_errors.size(), 2u) << s1.ToJson().dump();
+  // The same through the randomized path (gram_limit 1; d = 60 values per texel), whose refits
+  // and first fit over all texels are warm-started (CompressOptions::lpca_warm_start).
+  o.gram_limit = 1;
+  const Codec w1 = CompressWithThreads(cl, o, 1, &s1), w2 = CompressWithThreads(cl, o, 2, &s2);
+  test::ExpectSameCodec(w1, w2);
+  EXPECT_EQ(s1.sample_errors, s2.sample_errors);
+  EXPECT_EQ(s1.iteration_errors, s2.iteration_errors);
+  EXPECT_GE(s1.iteration_errors.size(), 2u) << s1.ToJson().dump();
 }
 
 TEST(HalfStorage, HalvesTheFloatArraysWithinTheRoundingBound) {
