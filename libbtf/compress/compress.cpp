@@ -430,7 +430,6 @@ class TexelMatrix {
     else f_.resize(static_cast<Eigen::Index>(rows), static_cast<Eigen::Index>(cols));
   }
   void Clear() { f_.resize(0, 0), h_.resize(0, 0); }
-  std::size_t rows() const { return std::size_t(half_ ? h_.rows() : f_.rows()); }
   std::size_t cols() const { return std::size_t(half_ ? h_.cols() : f_.cols()); }
   // Row i's storage, to fill: float values, or half bits (half.h).
   float* FloatRow(std::size_t i) { return f_.row(static_cast<Eigen::Index>(i)).data(); }
@@ -976,7 +975,8 @@ class LpcaCompressor {
       Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> sums =
           Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>::Zero(K_, w);
       for (std::size_t i = 0; i < S; ++i)
-        sums.row(assign[i]) += M.row(static_cast<Eigen::Index>(sample[i])).segment(c0, w).template cast<float>().template cast<double>();
+        sums.row(assign[i]) +=
+            M.row(static_cast<Eigen::Index>(sample[i])).segment(c0, w).template cast<float>().template cast<double>();
       for (int k = 0; k < K_; ++k)
         if (count[static_cast<std::size_t>(k)] > 0)
           centers.row(k).segment(c0, w) = (sums.row(k) / double(count[static_cast<std::size_t>(k)])).cast<float>();
@@ -993,7 +993,8 @@ class LpcaCompressor {
       centers.row(k) = M.row(static_cast<Eigen::Index>(pick)).template cast<float>();
 #pragma omp parallel for schedule(static)
       for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(sample.size()); ++i)
-        dist[i] = std::min(dist[i], double((M.row(static_cast<Eigen::Index>(sample[i])).template cast<float>() - centers.row(k)).squaredNorm()));
+        dist[i] = std::min(
+            dist[i], double((M.row(static_cast<Eigen::Index>(sample[i])).template cast<float>() - centers.row(k)).squaredNorm()));
       const double s = std::accumulate(dist.begin(), dist.end(), 0.0);
       if (!(s > 0)) {  // fewer distinct ABRDFs than clusters: duplicate centers (clusters stay empty, re-seeded)
         pick = sample[std::size_t(k + 1) % sample.size()];
