@@ -554,15 +554,22 @@ class LpcaCompressor {
       CheckFiniteSlot(in_, v, slot.data());
       tr_.Apply(in_, v, slot.data(), slot.size());
       if (half()) ToHalves(v, slot, halves, std::is_same_v<T, float>);
+      // channels: a compile-time 3 (RGB: the copy inlined, no memmove call per value run) or C.
+      const auto transpose = [&](auto channels) {
+        const std::size_t cc = channels;
 #pragma omp parallel for schedule(static)
-      for (std::ptrdiff_t b = 0; b < static_cast<std::ptrdiff_t>(tiles); ++b) {
-        const std::size_t i0 = std::size_t(b) * kTile, i1 = std::min(texels.size(), i0 + kTile);
-        for (int l = 0; l < L; ++l) {
-          const T* from = src + std::size_t(l) * N_ * C;
-          const std::size_t at = (std::size_t(v) * L + l) * C;
-          for (std::size_t i = i0; i < i1; ++i) std::copy_n(from + texels[i] * C, C, rows[i] + at);
+        for (std::ptrdiff_t b = 0; b < static_cast<std::ptrdiff_t>(tiles); ++b) {
+          const std::size_t i0 = std::size_t(b) * kTile, i1 = std::min(texels.size(), i0 + kTile);
+          for (int l = 0; l < L; ++l) {
+            const T* from = src + std::size_t(l) * N_ * cc;
+            const std::size_t at = (std::size_t(v) * L + l) * cc;
+            for (std::size_t i = i0; i < i1; ++i)
+              for (std::size_t c = 0; c < cc; ++c) rows[i][at + c] = from[texels[i] * cc + c];
+          }
         }
-      }
+      };
+      if (C == 3) transpose(std::integral_constant<std::size_t, 3>());
+      else transpose(std::size_t(C));
     }
     ++sum_.lpca_passes;
   }
