@@ -456,6 +456,16 @@ class TexelMatrix {
   HalfMatrix h_;
 };
 
+// out[0, w) = M(i, c0 .. c0 + w) as float (the texel matrix in half: F16C, half.h).
+template <typename Mat>
+void RowToFloat(const Mat& M, Eigen::Index i, float* out, Eigen::Index c0 = 0, Eigen::Index w = -1) {
+  if (w < 0) w = M.cols();
+  if constexpr (std::is_same_v<Mat, TexelMatrix::HalfMatrix>)
+    HalvesToFloats(reinterpret_cast<const std::uint16_t*>(M.row(i).data()) + c0, out, std::size_t(w));
+  else
+    std::copy_n(M.row(i).data() + c0, w, out);
+}
+
 // Distributed (docs/scaling.md): rank r owns a contiguous range of whole kRows texel blocks and
 // reads, holds and reassigns only those texels; vectors of one value per texel (assignment,
 // residual, norm) are shared by every rank. The k-means sample's rows are gathered on rank 0,
@@ -688,11 +698,14 @@ class LpcaCompressor {
       Eigen::MatrixXf P;
       if (rows) {
         RowMatrixXf X(w, M.cols());
-        for (Eigen::Index i = 0; i < w; ++i)
-          X.row(i) = M.row(static_cast<Eigen::Index>(rows[first + std::size_t(i)])).template cast<float>();
+        for (Eigen::Index i = 0; i < w; ++i) RowToFloat(M, static_cast<Eigen::Index>(rows[first + std::size_t(i)]), X.row(i).data());
         P.noalias() = X * centers.transpose();
+      } else if constexpr (std::is_same_v<Mat, RowMatrixXf>) {
+        P.noalias() = M.middleRows(static_cast<Eigen::Index>(first), w) * centers.transpose();
       } else {
-        P.noalias() = M.middleRows(static_cast<Eigen::Index>(first), w).template cast<float>() * centers.transpose();
+        RowMatrixXf X(w, M.cols());
+        for (Eigen::Index i = 0; i < w; ++i) RowToFloat(M, static_cast<Eigen::Index>(first) + i, X.row(i).data());
+        P.noalias() = X * centers.transpose();
       }
       for (Eigen::Index i = 0; i < w; ++i) {
         const std::size_t t = rows ? rows[first + std::size_t(i)] : first + std::size_t(i);
@@ -884,8 +897,7 @@ class LpcaCompressor {
       const int k = order_k[static_cast<std::size_t>(kk)];
       const auto& m = members[static_cast<std::size_t>(k)];
       RowMatrixXf x(static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d_));
-      for (std::size_t i = 0; i < m.size(); ++i)
-        x.row(Eigen::Index(i)) = M.row(static_cast<Eigen::Index>(rows[m[i]])).template cast<float>();
+      for (std::size_t i = 0; i < m.size(); ++i) RowToFloat(M, static_cast<Eigen::Index>(rows[m[i]]), x.row(Eigen::Index(i)).data());
       PcaResult p = Pca(x, MakeRequest(o_, std::uint64_t(k)));
       p.scores.resize(0, 0);
       f.pca[static_cast<std::size_t>(k)] = std::move(p);
@@ -909,8 +921,7 @@ class LpcaCompressor {
     ForBlocks(S, [&](std::size_t first, std::size_t count) {
       const Eigen::Index w = static_cast<Eigen::Index>(count);
       RowMatrixXf X(w, M.cols());
-      for (Eigen::Index i = 0; i < w; ++i)
-        X.row(i) = M.row(static_cast<Eigen::Index>(rows[first + std::size_t(i)])).template cast<float>();
+      for (Eigen::Index i = 0; i < w; ++i) RowToFloat(M, static_cast<Eigen::Index>(rows[first + std::size_t(i)]), X.row(i).data());
       const Eigen::MatrixXf P = X * model.big.transpose();
       for (Eigen::Index i = 0; i < w; ++i) {
         const std::size_t s = first + std::size_t(i);
@@ -981,9 +992,11 @@ class LpcaCompressor {
       // Row-major: a texel's values are added to one contiguous row of sums.
       Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> sums =
           Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>::Zero(K_, w);
-      for (std::size_t i = 0; i < S; ++i)
-        sums.row(assign[i]) +=
-            M.row(static_cast<Eigen::Index>(sample[i])).segment(c0, w).template cast<float>().template cast<double>();
+      Eigen::RowVectorXf x(w);
+      for (std::size_t i = 0; i < S; ++i) {
+        RowToFloat(M, static_cast<Eigen::Index>(sample[i]), x.data(), c0, w);
+        sums.row(assign[i]) += x.cast<double>();
+      }
       for (int k = 0; k < K_; ++k)
         if (count[static_cast<std::size_t>(k)] > 0)
           centers.row(k).segment(c0, w) = (sums.row(k) / double(count[static_cast<std::size_t>(k)])).cast<float>();
@@ -997,11 +1010,16 @@ class LpcaCompressor {
     std::vector<double> dist(sample.size(), std::numeric_limits<double>::infinity());
     std::size_t pick = sample[std::uniform_int_distribution<std::size_t>(0, sample.size() - 1)(rng)];
     for (int k = 0; k < K_; ++k) {
-      centers.row(k) = M.row(static_cast<Eigen::Index>(pick)).template cast<float>();
-#pragma omp parallel for schedule(static)
-      for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(sample.size()); ++i)
-        dist[i] = std::min(
-            dist[i], double((M.row(static_cast<Eigen::Index>(sample[i])).template cast<float>() - centers.row(k)).squaredNorm()));
+      RowToFloat(M, static_cast<Eigen::Index>(pick), centers.row(k).data());
+#pragma omp parallel
+      {
+        Eigen::RowVectorXf x(M.cols());
+#pragma omp for schedule(static)
+        for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(sample.size()); ++i) {
+          RowToFloat(M, static_cast<Eigen::Index>(sample[i]), x.data());
+          dist[i] = std::min(dist[i], double((x - centers.row(k)).squaredNorm()));
+        }
+      }
       const double s = std::accumulate(dist.begin(), dist.end(), 0.0);
       if (!(s > 0)) {  // fewer distinct ABRDFs than clusters: duplicate centers (clusters stay empty, re-seeded)
         pick = sample[std::size_t(k + 1) % sample.size()];
