@@ -96,6 +96,7 @@ void CompressOptions::Check() const {
   BTF_CHECK_OPTION(min_improvement >= 0 && min_improvement < 1, "min_improvement", "must be in [0, 1)");
   BTF_CHECK_OPTION(lpca_memory == "auto" || lpca_memory == "in-core" || lpca_memory == "out-of-core", "lpca_memory",
                    "must be auto, in-core or out-of-core");
+  BTF_CHECK_OPTION(lpca_matrix == "half" || lpca_matrix == "float", "lpca_matrix", "must be half or float");
   BTF_CHECK_OPTION(gram_limit >= 1, "gram_limit", "must be >= 1");
   BTF_CHECK_OPTION(lpca_sample >= 1, "lpca_sample", "must be >= 1");
   BTF_CHECK_OPTION(storage == CodecStorage::kFloat || !IsFullMatrixFactorisation(method), "storage",
@@ -108,7 +109,7 @@ nlohmann::json CompressOptions::ToJson() const {
           {"retained_energy", retained_energy}, {"seed", seed},
           {"log_transform", log_transform}, {"log_epsilon", log_epsilon},
           {"max_iterations", max_iterations}, {"min_improvement", min_improvement}, {"lpca_memory", lpca_memory},
-          {"lpca_sample", lpca_sample},
+          {"lpca_sample", lpca_sample},     {"lpca_matrix", lpca_matrix},
           {"gram_limit", gram_limit},       {"lpca_warm_start", lpca_warm_start},       {"storage", StorageName(storage)},
           {"max_bytes", max_bytes},         {"quant_bits", quant_bits},
           {"tensor_growth", tensor_growth}};
@@ -129,7 +130,8 @@ nlohmann::json CompressSummary::ToJson() const {
     j["iteration_relative_errors"] = iteration_errors;
     j["iteration_reassigned_texels"] = iteration_changes;
     j["sample_round_relative_errors"] = sample_errors;
-    j["lpca_memory"] = {{"mode", lpca_memory}, {"input_passes", lpca_passes}, {"peak_rss_bytes", peak_rss_bytes}};
+    j["lpca_memory"] = {{"mode", lpca_memory}, {"matrix", lpca_matrix}, {"input_passes", lpca_passes},
+                        {"peak_rss_bytes", peak_rss_bytes}};
   }
   if (method == "lpca-tensor")
     j["tensor"] = {{"terms", tensor_terms},
@@ -185,8 +187,8 @@ std::string CompressSummary::Report() const {
   if (!sample_errors.empty())
     r += fmt::format("  sample round errors   {:.5f}\n", fmt::join(sample_errors, " "));
   if (!lpca_memory.empty())
-    r += fmt::format("  lpca memory           {}, {} passes over the input, peak memory {}\n", lpca_memory, lpca_passes,
-                     FormatBytes(peak_rss_bytes));
+    r += fmt::format("  lpca memory           {}, {} texel matrix, {} passes over the input, peak memory {}\n", lpca_memory,
+                     lpca_matrix, lpca_passes, FormatBytes(peak_rss_bytes));
   if (scene_used)
     r += fmt::format("  scene                 kept {}/{} views, {}/{} lights; full codec {} -> saved {}; error on used "
                      "directions {:.6g}\n",

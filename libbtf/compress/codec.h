@@ -92,6 +92,11 @@ struct CompressOptions {
   // LpcaMemoryLimit()), "in-core" (hold the matrix; refused above BTF_MAX_BYTES) or "out-of-core"
   // (stream the view slots, docs/btf-compress.md "Out-of-core LPCA"). Same codec either way.
   std::string lpca_memory = "auto";
+  // LPCA's texel-major matrix (in core, and each chunk out of core): "half" (IEEE binary16, 2 bytes
+  // a value; the clusters are fitted to the half-rounded input, relative rounding <= 2^-11, the
+  // error is measured against the input itself; a transformed value beyond +-65504 is refused,
+  // naming it) or "float" (4 bytes a value, any finite input).
+  std::string lpca_matrix = "half";
   // LPCA stops when an iteration improves the relative error by less than this fraction.
   double min_improvement = 1e-3;
   // LPCA: texels of the k-means sample, max(lpca_sample, clusters), all texels if there are no
@@ -130,6 +135,7 @@ struct CompressSummary {
   // clusters); empty when the sample is all texels.
   std::vector<double> sample_errors;
   std::string lpca_memory;               // lpca: "in-core" or "out-of-core" (the mode used)
+  std::string lpca_matrix;               // lpca: "half" or "float" (the texel matrix's storage)
   int lpca_passes = 0;                   // lpca: passes over the input's view slots
   std::uint64_t peak_rss_bytes = 0;      // lpca: the process's peak resident memory after compressing
   // lpca-tensor: rank-1 terms kept, quantisation bits, the LPCA stage's relative error and the

@@ -8,6 +8,7 @@
 #include <limits>
 #include <numeric>
 #include <random>
+#include <type_traits>
 
 #include <omp.h>
 
@@ -16,6 +17,7 @@
 #include "libbtf/core/distributed.h"
 #include "libbtf/core/error.h"
 #include "libbtf/core/error_stats.h"
+#include "libbtf/io/half.h"
 #include "libbtf/io/slot_source.h"
 
 namespace btf {
@@ -419,6 +421,57 @@ struct ReassignModel {
   }
 };
 
+// LPCA's texel-major matrix (texels x d, a row = one texel's transformed ABRDF), held as IEEE half
+// (--lpca-matrix half: 2 bytes a value) or float. Consumers convert rows to float where they use
+// them: blocks of rows for the GEMMs, single rows for gathers; Visit hands the matrix itself to
+// code templated on it (k-means on the whole matrix).
+class TexelMatrix {
+ public:
+  using HalfMatrix = Eigen::Matrix<Eigen::half, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+  void Resize(std::size_t rows, std::size_t cols, bool half) {
+    Clear();
+    half_ = half;
+    if (half_) h_.resize(static_cast<Eigen::Index>(rows), static_cast<Eigen::Index>(cols));
+    else f_.resize(static_cast<Eigen::Index>(rows), static_cast<Eigen::Index>(cols));
+  }
+  void Clear() { f_.resize(0, 0), h_.resize(0, 0); }
+  std::size_t cols() const { return std::size_t(half_ ? h_.cols() : f_.cols()); }
+  // Row i's storage, to fill: float values, or half bits (half.h).
+  float* FloatRow(std::size_t i) { return f_.row(static_cast<Eigen::Index>(i)).data(); }
+  std::uint16_t* HalfRow(std::size_t i) { return reinterpret_cast<std::uint16_t*>(h_.row(static_cast<Eigen::Index>(i)).data()); }
+  // out[0, cols()) = row i, as float.
+  void CopyRow(std::size_t i, float* out) const { CopyRows(i, 1, out); }
+  // X = rows [first, first + count), as float.
+  void Rows(std::size_t first, std::size_t count, RowMatrixXf& X) const {
+    X.resize(static_cast<Eigen::Index>(count), static_cast<Eigen::Index>(cols()));
+    CopyRows(first, count, X.data());
+  }
+  template <typename F>
+  decltype(auto) Visit(F&& f) const { return half_ ? f(h_) : f(f_); }
+
+ private:
+  void CopyRows(std::size_t first, std::size_t count, float* out) const {
+    const std::size_t n = count * cols();
+    if (half_) HalvesToFloats(reinterpret_cast<const std::uint16_t*>(h_.data()) + first * cols(), out, n);
+    else std::copy_n(f_.data() + first * cols(), n, out);
+  }
+
+  bool half_ = true;
+  RowMatrixXf f_;
+  HalfMatrix h_;
+};
+
+// out[0, w) = M(i, c0 .. c0 + w) as float (the texel matrix in half: F16C, half.h).
+template <typename Mat>
+void RowToFloat(const Mat& M, Eigen::Index i, float* out, Eigen::Index c0 = 0, Eigen::Index w = -1) {
+  if (w < 0) w = M.cols();
+  if constexpr (std::is_same_v<Mat, TexelMatrix::HalfMatrix>)
+    HalvesToFloats(reinterpret_cast<const std::uint16_t*>(M.row(i).data()) + c0, out, std::size_t(w));
+  else
+    std::copy_n(M.row(i).data() + c0, w, out);
+}
+
 // Distributed (docs/scaling.md): rank r owns a contiguous range of whole kRows texel blocks and
 // reads, holds and reassigns only those texels; vectors of one value per texel (assignment,
 // residual, norm) are shared by every rank. The k-means sample's rows are gathered on rank 0,
@@ -434,12 +487,13 @@ class LpcaCompressor {
         N_(std::size_t(in.height()) * in.width()),
         d_(std::size_t(in.views().size()) * in.lights().size() * in.channels()),
         R_(dist::Size()), rank_(dist::Rank()), t0_(TexelBegin(rank_)), t1_(TexelBegin(rank_ + 1)) {
-    const double matrix = 4.0 * double(N_) * double(d_), limit = double(LpcaMemoryLimit());
+    const double matrix = value_bytes() * double(N_) * double(d_), limit = double(LpcaMemoryLimit());
     ooc_ = o_.lpca_memory == "out-of-core" || (o_.lpca_memory == "auto" && R_ == 1 && matrix > limit);
     if (ooc_ && R_ > 1) ThrowUsage("--lpca-memory out-of-core runs on one rank (ranks split the texel matrix instead)");
     budget_ = limit / 2;  // out of core: the texel chunk, or one wave of clusters' rows
-    chunk_ = std::max<std::size_t>(kRows, std::size_t(budget_ / (4.0 * double(d_))) / kRows * kRows);
+    chunk_ = std::max<std::size_t>(kRows, std::size_t(budget_ / (value_bytes() * double(d_))) / kRows * kRows);
     sum_.lpca_memory = ooc_ ? "out-of-core" : "in-core";
+    sum_.lpca_matrix = o_.lpca_matrix;
   }
 
   // measure = false: no error pass (lpca-tensor measures its own codec).
@@ -457,7 +511,7 @@ class LpcaCompressor {
     t.Restart();
     Iterate(fit);
     sum_.times.Add("iterate", t.Seconds());
-    A_.resize(0, 0);  // the evaluation decodes the codec; the texel matrix is no longer needed
+    A_.Clear();  // the evaluation decodes the codec; the texel matrix is no longer needed
     StoreModel(fit, codec);
     residual_energy_ = fit.error * fit.error * total_;
     sum_.peak_rss_bytes = dist::PeakResidentBytes();
@@ -475,6 +529,7 @@ class LpcaCompressor {
 
  private:
   static constexpr std::size_t kRows = 256;      // texels per GEMM block (assignment, reassignment)
+  static constexpr std::size_t kTile = 64;       // texels per transpose tile (ReadRows)
   static constexpr int kLloydRounds = 100;       // k-means rounds at most
   static constexpr double kLloydTolerance = 1e-5;  // stop when the objective improves by less (relative)
 
@@ -484,38 +539,109 @@ class LpcaCompressor {
     return std::min(N_, blocks * std::size_t(r) / std::size_t(R_) * kRows);
   }
   std::size_t local() const { return t1_ - t0_; }
+  bool half() const { return o_.lpca_matrix == "half"; }
+  double value_bytes() const { return half() ? 2.0 : 4.0; }  // of the texel matrix
   void Warn(const std::string& w) const {
     sum_.warnings.push_back(w);
     if (rank_ == 0) rep_.Warn("{}", w);  // the same on every rank: reported once
   }
 
-  // One pass over the view slots: rows[i] (d floats) gets texel texels[i]'s transformed ABRDF.
-  void ReadRows(const std::vector<std::size_t>& texels, const std::vector<float*>& rows) const {
+  // One pass over the view slots: rows[i] (d values: float, or half bits) gets texel texels[i]'s
+  // transformed ABRDF; with a half matrix, float rows get the half-rounded values, so that the
+  // rows gathered out of core equal the in-core matrix's. Per slot, the transpose runs over tiles
+  // of texels (one per thread at a time): for each light, the tile's values are one contiguous run
+  // of the slot, written to the tile's rows.
+  template <typename T>
+  void ReadRows(const std::vector<std::size_t>& texels, const std::vector<T*>& rows) const {
+    static_assert(std::is_same_v<T, float> || std::is_same_v<T, std::uint16_t>);
+    BTF_CHECK((std::is_same_v<T, float> || half()));
     const int V = in_.views().size(), L = in_.lights().size(), C = in_.channels();
-    std::vector<float> slot(in_.slot_size());
+    const std::size_t n = in_.slot_size(), tiles = (texels.size() + kTile - 1) / kTile;
+    std::vector<float> slot(n);
+    std::vector<std::uint16_t> halves(half() ? n : 0);
+    const T* src;
+    if constexpr (std::is_same_v<T, float>) src = slot.data();
+    else src = halves.data();
     for (int v = 0; v < V; ++v) {
       rep_.Progress(std::size_t(v), std::size_t(V), "read");
       in_.ReadViewSlot(v, slot.data());
       CheckFiniteSlot(in_, v, slot.data());
       tr_.Apply(in_, v, slot.data(), slot.size());
+      if (half()) ToHalves(v, slot, halves, std::is_same_v<T, float>);
+      // channels: a compile-time 3 (RGB: the copy inlined, no memmove call per value run) or C.
+      const auto transpose = [&](auto channels) {
+        const std::size_t cc = channels;
 #pragma omp parallel for schedule(static)
-      for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(texels.size()); ++i)
-        for (int l = 0; l < L; ++l)
-          for (int c = 0; c < C; ++c)
-            rows[std::size_t(i)][(std::size_t(v) * L + l) * C + c] = slot[(std::size_t(l) * N_ + texels[std::size_t(i)]) * C + c];
+        for (std::ptrdiff_t b = 0; b < static_cast<std::ptrdiff_t>(tiles); ++b) {
+          const std::size_t i0 = std::size_t(b) * kTile, i1 = std::min(texels.size(), i0 + kTile);
+          for (int l = 0; l < L; ++l) {
+            const T* from = src + std::size_t(l) * N_ * cc;
+            const std::size_t at = (std::size_t(v) * L + l) * cc;
+            for (std::size_t i = i0; i < i1; ++i)
+              for (std::size_t c = 0; c < cc; ++c) rows[i][at + c] = from[texels[i] * cc + c];
+          }
+        }
+      };
+      if (C == 3) transpose(std::integral_constant<std::size_t, 3>());
+      else transpose(std::size_t(C));
     }
     ++sum_.lpca_passes;
   }
 
+  // halves = slot as half bits, in threads over static ranges; slot = their values if `round`. A
+  // value beyond the half range is refused, naming it (every rank reads whole slots: all refuse).
+  void ToHalves(int v, std::vector<float>& slot, std::vector<std::uint16_t>& halves, bool round) const {
+    constexpr std::size_t kRange = 1 << 16;
+    const std::ptrdiff_t ranges = static_cast<std::ptrdiff_t>((slot.size() + kRange - 1) / kRange);
+    bool overflow = false;
+#pragma omp parallel for schedule(static) reduction(|| : overflow)
+    for (std::ptrdiff_t r = 0; r < ranges; ++r) {
+      const std::size_t i0 = std::size_t(r) * kRange, m = std::min(kRange, slot.size() - i0);
+      FloatsToHalves(slot.data() + i0, halves.data() + i0, m);
+      bool any = false;
+      for (std::size_t i = i0; i < i0 + m; ++i) any |= (halves[i] & 0x7c00u) == 0x7c00u;
+      overflow = overflow || any;
+    }
+    if (!overflow) {
+      if (round) {
+#pragma omp parallel for schedule(static)
+        for (std::ptrdiff_t r = 0; r < ranges; ++r) {
+          const std::size_t i0 = std::size_t(r) * kRange;
+          HalvesToFloats(halves.data() + i0, slot.data() + i0, std::min(kRange, slot.size() - i0));
+        }
+      }
+      return;
+    }
+    const std::size_t i = std::size_t(std::find_if(halves.begin(), halves.end(), [](std::uint16_t h) {
+                                        return (h & 0x7c00u) == 0x7c00u;
+                                      }) - halves.begin());
+    const std::size_t C = std::size_t(in_.channels()), W = std::size_t(in_.width());
+    ThrowBadInput("'{}' holds {} at view {}, light {}, texel (y {}, x {}), channel {}{}: beyond the half range (|x| <= "
+                  "{}) of LPCA's texel matrix; use --lpca-matrix float (4 bytes a value instead of 2){}",
+                  in_.name(), slot[i], v, i / (N_ * C), i / C % N_ / W, i / C % W, i % C,
+                  tr_.log ? " (after the log transform)" : "", kHalfMax, tr_.log ? "" : " or --log");
+  }
+
   // A = the rows of texels [t0_, t1_) (one pass); chunk_norms_ their squared norms.
   void LoadRows() {
-    A_.resize(static_cast<Eigen::Index>(local()), static_cast<Eigen::Index>(d_));
+    A_.Resize(local(), d_, half());
     std::vector<std::size_t> texels(local());
-    std::vector<float*> rows(local());
-    for (std::size_t i = 0; i < local(); ++i) texels[i] = t0_ + i, rows[i] = A_.row(Eigen::Index(i)).data();
-    ReadRows(texels, rows);
+    std::iota(texels.begin(), texels.end(), t0_);
+    if (half()) {
+      std::vector<std::uint16_t*> rows(local());
+      for (std::size_t i = 0; i < local(); ++i) rows[i] = A_.HalfRow(i);
+      ReadRows(texels, rows);
+    } else {
+      std::vector<float*> rows(local());
+      for (std::size_t i = 0; i < local(); ++i) rows[i] = A_.FloatRow(i);
+      ReadRows(texels, rows);
+    }
     chunk_norms_.resize(local());
-    for (Eigen::Index i = 0; i < A_.rows(); ++i) chunk_norms_[std::size_t(i)] = A_.row(i).cast<double>().squaredNorm();
+    ForBlocks(local(), [&](std::size_t first, std::size_t count) {
+      RowMatrixXf X;
+      A_.Rows(first, count, X);
+      for (Eigen::Index i = 0; i < X.rows(); ++i) chunk_norms_[first + std::size_t(i)] = X.row(i).cast<double>().squaredNorm();
+    });
   }
 
   // Runs f() with A_ holding the rows of texels [t0_, t1_): in core once (A_ holds this rank's
@@ -529,7 +655,7 @@ class LpcaCompressor {
       LoadRows();
       f();
     }
-    A_.resize(0, 0);
+    A_.Clear();
     t0_ = 0, t1_ = N_;
   }
 
@@ -543,7 +669,7 @@ class LpcaCompressor {
   // Texel-major matrix A (this rank's texels x d, row = one texel's ABRDF), transformed; texel
   // norms (of every texel, on every rank).
   void ReadTexelMajor() {
-    CheckAllocation(4.0 * double(local()) * double(d_),
+    CheckAllocation(value_bytes() * double(local()) * double(d_),
                     R_ > 1 ? fmt::format("texel-major copy of '{}' for LPCA (texels {}-{} of {} on this rank)", in_.name(),
                                          t0_, t1_, N_)
                            : fmt::format("texel-major copy of '{}' for LPCA (--lpca-memory out-of-core streams it)", in_.name()));
@@ -567,7 +693,8 @@ class LpcaCompressor {
 
   // For rows rows[0..m) of M (rows 0..m-1 when rows is null): the nearest center (squared
   // Euclidean distance, the lower index on ties) and that distance (norms: of M's rows).
-  static void NearestCenters(const RowMatrixXf& M, const double* norms, const RowMatrixXf& centers,
+  template <typename Mat>
+  static void NearestCenters(const Mat& M, const double* norms, const RowMatrixXf& centers,
                              const std::size_t* rows, std::size_t m, std::int32_t* assign, double* dist) {
     const Eigen::VectorXd cn = centers.cast<double>().rowwise().squaredNorm();
     ForBlocks(m, [&](std::size_t first, std::size_t count) {
@@ -575,10 +702,14 @@ class LpcaCompressor {
       Eigen::MatrixXf P;
       if (rows) {
         RowMatrixXf X(w, M.cols());
-        for (Eigen::Index i = 0; i < w; ++i) X.row(i) = M.row(static_cast<Eigen::Index>(rows[first + std::size_t(i)]));
+        for (Eigen::Index i = 0; i < w; ++i) RowToFloat(M, static_cast<Eigen::Index>(rows[first + std::size_t(i)]), X.row(i).data());
         P.noalias() = X * centers.transpose();
-      } else {
+      } else if constexpr (std::is_same_v<Mat, RowMatrixXf>) {
         P.noalias() = M.middleRows(static_cast<Eigen::Index>(first), w) * centers.transpose();
+      } else {
+        RowMatrixXf X(w, M.cols());
+        for (Eigen::Index i = 0; i < w; ++i) RowToFloat(M, static_cast<Eigen::Index>(first) + i, X.row(i).data());
+        P.noalias() = X * centers.transpose();
       }
       for (Eigen::Index i = 0; i < w; ++i) {
         const std::size_t t = rows ? rows[first + std::size_t(i)] : first + std::size_t(i);
@@ -626,7 +757,7 @@ class LpcaCompressor {
     if (rank_ == 0) {
       CheckAllocation(4.0 * double(sample.size()) * double(d_), fmt::format("k-means sample of '{}' on rank 0", in_.name()));
       S.resize(static_cast<Eigen::Index>(sample.size()), static_cast<Eigen::Index>(d_));
-      for (auto i = lo; i < hi; ++i) S.row(i) = A_.row(static_cast<Eigen::Index>(sample[std::size_t(i)] - t0_));
+      for (auto i = lo; i < hi; ++i) A_.CopyRow(sample[std::size_t(i)] - t0_, S.row(i).data());
       std::size_t at = std::size_t(hi);
       for (int r = 1; r < R_; ++r) {
         const std::size_t end = std::size_t(
@@ -636,7 +767,7 @@ class LpcaCompressor {
       }
     } else {
       RowMatrixXf mine(hi - lo, static_cast<Eigen::Index>(d_));
-      for (auto i = lo; i < hi; ++i) mine.row(i - lo) = A_.row(static_cast<Eigen::Index>(sample[std::size_t(i)] - t0_));
+      for (auto i = lo; i < hi; ++i) A_.CopyRow(sample[std::size_t(i)] - t0_, mine.row(i - lo).data());
       dist::Send(0, 1, mine.data(), std::size_t(mine.size()) * sizeof(float));
     }
     return S;
@@ -666,14 +797,14 @@ class LpcaCompressor {
     // sample rounds), sample_rounds, first_fit (the first assignment of all texels and their PCA).
     Timer t;
     double kmeans_s = 0;
-    auto on_sample = [&](const RowMatrixXf& M, const double* norms, const std::vector<std::size_t>& rows) {
+    auto on_sample = [&](const auto& M, const double* norms, const std::vector<std::size_t>& rows) {
       std::vector<std::int32_t> assign;
       rounds = Lloyd(M, norms, rows, rng, centers, assign);
       kmeans_s = t.Seconds();
       if (mini_batch) models = SampleRounds(M, norms, rows, std::move(assign), sample_errors);
     };
     if (R_ == 1 && !ooc_) {
-      on_sample(A_, norms_.data(), sample);
+      A_.Visit([&](const auto& M) { on_sample(M, norms_.data(), sample); });
     } else {  // the sample's rows gathered (by rank 0, or in one pass out of core): the same Lloyd
       const RowMatrixXf rows = ooc_ ? ReadSampleRows(sample) : GatherSampleRows(sample);
       if (rank_ == 0) {
@@ -707,7 +838,9 @@ class LpcaCompressor {
       Reassign(models, fit.assign);
     } else {
       std::vector<std::int32_t> mine(ooc_ ? N_ : local());
-      ForChunks([&] { NearestCenters(A_, nullptr, centers, nullptr, local(), mine.data() + (ooc_ ? t0_ : 0), nullptr); });
+      ForChunks([&] { A_.Visit([&](const auto& M) {
+        NearestCenters(M, nullptr, centers, nullptr, local(), mine.data() + (ooc_ ? t0_ : 0), nullptr);
+      }); });
       fit.assign = R_ > 1 ? dist::AllGatherConcat(mine) : std::move(mine);
     }
     BTF_CHECK(fit.assign.size() == N_);
@@ -730,7 +863,8 @@ class LpcaCompressor {
   // the sample's relative error by less than min_improvement or max_iterations rounds. errors:
   // the sample's relative error after each fit (the first from Lloyd's clusters). Returns the
   // best fit's models (mean and basis; the scores are dropped).
-  std::vector<PcaResult> SampleRounds(const RowMatrixXf& M, const double* norms, const std::vector<std::size_t>& rows,
+  template <typename Mat>
+  std::vector<PcaResult> SampleRounds(const Mat& M, const double* norms, const std::vector<std::size_t>& rows,
                                       std::vector<std::int32_t> assign, std::vector<double>& errors) const {
     double energy = 0;
     for (std::size_t t : rows) energy += norms[t];
@@ -754,7 +888,8 @@ class LpcaCompressor {
   // FitClusters on the sample (f.assign: per sample texel, members: sample positions); residual:
   // per sample texel after the last reassignment, empty before the first (then empty clusters
   // take the first sample texels of clusters that can spare one).
-  void FitSample(const RowMatrixXf& M, const std::vector<std::size_t>& rows, double energy,
+  template <typename Mat>
+  void FitSample(const Mat& M, const std::vector<std::size_t>& rows, double energy,
                  const std::vector<double>& residual, ClusterFit& f, const ClusterFit* prev) const {
     std::vector<std::vector<std::size_t>> members = MembersFillingEmpty(f.assign, K_, residual.empty() ? nullptr : residual.data());
     f.pca.assign(static_cast<std::size_t>(K_), PcaResult{});
@@ -776,7 +911,7 @@ class LpcaCompressor {
       const int k = order_k[static_cast<std::size_t>(kk)];
       const auto& m = members[static_cast<std::size_t>(k)];
       RowMatrixXf x(static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d_));
-      for (std::size_t i = 0; i < m.size(); ++i) x.row(Eigen::Index(i)) = M.row(static_cast<Eigen::Index>(rows[m[i]]));
+      for (std::size_t i = 0; i < m.size(); ++i) RowToFloat(M, static_cast<Eigen::Index>(rows[m[i]]), x.row(Eigen::Index(i)).data());
       PcaResult p = PcaInPlace(x, MakeRequest(o_, std::uint64_t(k)), WarmStart(prev ? &prev->pca : nullptr, k));
       p.scores.resize(0, 0);
       f.pca[static_cast<std::size_t>(k)] = std::move(p);
@@ -789,7 +924,8 @@ class LpcaCompressor {
 
   // Reassign on the sample: each sample texel (rows `rows` of M) to the cluster whose model
   // reconstructs it best, in static blocks of kRows gathered rows; returns the number moved.
-  std::size_t ReassignSample(const RowMatrixXf& M, const double* norms, const std::vector<std::size_t>& rows,
+  template <typename Mat>
+  std::size_t ReassignSample(const Mat& M, const double* norms, const std::vector<std::size_t>& rows,
                              const std::vector<PcaResult>& pca, std::vector<std::int32_t>& assign,
                              std::vector<double>& residual) const {
     const ReassignModel model(pca, o_.components, d_);
@@ -799,7 +935,7 @@ class LpcaCompressor {
     ForBlocks(S, [&](std::size_t first, std::size_t count) {
       const Eigen::Index w = static_cast<Eigen::Index>(count);
       RowMatrixXf X(w, M.cols());
-      for (Eigen::Index i = 0; i < w; ++i) X.row(i) = M.row(static_cast<Eigen::Index>(rows[first + std::size_t(i)]));
+      for (Eigen::Index i = 0; i < w; ++i) RowToFloat(M, static_cast<Eigen::Index>(rows[first + std::size_t(i)]), X.row(i).data());
       const Eigen::MatrixXf P = X * model.big.transpose();
       for (Eigen::Index i = 0; i < w; ++i) {
         const std::size_t s = first + std::size_t(i);
@@ -813,7 +949,8 @@ class LpcaCompressor {
 
   // Seeds and Lloyd rounds on the rows `sample` of M (norms: of M's rows); returns the rounds.
   // assign: the sample texels' nearest centers.
-  int Lloyd(const RowMatrixXf& M, const double* norms, const std::vector<std::size_t>& sample, std::mt19937_64& rng,
+  template <typename Mat>
+  int Lloyd(const Mat& M, const double* norms, const std::vector<std::size_t>& sample, std::mt19937_64& rng,
             RowMatrixXf& centers, std::vector<std::int32_t>& assign) const {
     centers = SeedCenters(M, sample, rng);
     const std::size_t S = sample.size();
@@ -838,7 +975,8 @@ class LpcaCompressor {
   // Lloyd's update: each center the mean of its sample texels (double, in sample order, columns
   // split statically); an empty cluster takes the farthest sample texel of a cluster that can
   // spare one.
-  void UpdateMeans(const RowMatrixXf& M, const std::vector<std::size_t>& sample, std::vector<std::int32_t>& assign,
+  template <typename Mat>
+  void UpdateMeans(const Mat& M, const std::vector<std::size_t>& sample, std::vector<std::int32_t>& assign,
                    const std::vector<double>& dist, RowMatrixXf& centers) const {
     const std::size_t S = sample.size();
     std::vector<std::size_t> count(static_cast<std::size_t>(K_), 0);
@@ -868,8 +1006,11 @@ class LpcaCompressor {
       // Row-major: a texel's values are added to one contiguous row of sums.
       Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> sums =
           Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>::Zero(K_, w);
-      for (std::size_t i = 0; i < S; ++i)
-        sums.row(assign[i]) += M.row(static_cast<Eigen::Index>(sample[i])).segment(c0, w).cast<double>();
+      Eigen::RowVectorXf x(w);
+      for (std::size_t i = 0; i < S; ++i) {
+        RowToFloat(M, static_cast<Eigen::Index>(sample[i]), x.data(), c0, w);
+        sums.row(assign[i]) += x.cast<double>();
+      }
       for (int k = 0; k < K_; ++k)
         if (count[static_cast<std::size_t>(k)] > 0)
           centers.row(k).segment(c0, w) = (sums.row(k) / double(count[static_cast<std::size_t>(k)])).cast<float>();
@@ -877,15 +1018,22 @@ class LpcaCompressor {
   }
 
   // k-means++ seeds (D^2 sampling) on the sample.
-  RowMatrixXf SeedCenters(const RowMatrixXf& M, const std::vector<std::size_t>& sample, std::mt19937_64& rng) const {
+  template <typename Mat>
+  RowMatrixXf SeedCenters(const Mat& M, const std::vector<std::size_t>& sample, std::mt19937_64& rng) const {
     RowMatrixXf centers(K_, static_cast<Eigen::Index>(d_));
     std::vector<double> dist(sample.size(), std::numeric_limits<double>::infinity());
     std::size_t pick = sample[std::uniform_int_distribution<std::size_t>(0, sample.size() - 1)(rng)];
     for (int k = 0; k < K_; ++k) {
-      centers.row(k) = M.row(static_cast<Eigen::Index>(pick));
-#pragma omp parallel for schedule(static)
-      for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(sample.size()); ++i)
-        dist[i] = std::min(dist[i], double((M.row(static_cast<Eigen::Index>(sample[i])) - centers.row(k)).squaredNorm()));
+      RowToFloat(M, static_cast<Eigen::Index>(pick), centers.row(k).data());
+#pragma omp parallel
+      {
+        Eigen::RowVectorXf x(M.cols());
+#pragma omp for schedule(static)
+        for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(sample.size()); ++i) {
+          RowToFloat(M, static_cast<Eigen::Index>(sample[i]), x.data());
+          dist[i] = std::min(dist[i], double((x - centers.row(k)).squaredNorm()));
+        }
+      }
       const double s = std::accumulate(dist.begin(), dist.end(), 0.0);
       if (!(s > 0)) {  // fewer distinct ABRDFs than clusters: duplicate centers (clusters stay empty, re-seeded)
         pick = sample[std::size_t(k + 1) % sample.size()];
@@ -1021,7 +1169,7 @@ class LpcaCompressor {
             } else if (rank_ == r) {
               RowMatrixXf rows(static_cast<Eigen::Index>(hi - lo), static_cast<Eigen::Index>(d_));
               for (std::size_t i = lo; i < hi; ++i)
-                rows.row(Eigen::Index(i - lo)) = A_.row(static_cast<Eigen::Index>(m[i] - t0_));
+                A_.CopyRow(m[i] - t0_, rows.row(Eigen::Index(i - lo)).data());
               dist::Send(o, 2, rows.data(), std::size_t(rows.size()) * sizeof(float));
             }
           }
@@ -1040,7 +1188,7 @@ class LpcaCompressor {
         RowMatrixXf& x = X[static_cast<std::size_t>(k)];
         if (x.rows() == 0) x.resize(static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d_));
         for (std::size_t i = 0; i < m.size() && !ooc_; ++i)
-          if (m[i] >= t0_ && m[i] < t1_) x.row(Eigen::Index(i)) = A_.row(static_cast<Eigen::Index>(m[i] - t0_));
+          if (m[i] >= t0_ && m[i] < t1_) A_.CopyRow(m[i] - t0_, x.row(Eigen::Index(i)).data());
         f.pca[static_cast<std::size_t>(k)] = PcaInPlace(x, MakeRequest(o_, std::uint64_t(k)), WarmStart(warm, k));
         x.resize(0, 0);
       }
@@ -1092,7 +1240,9 @@ class LpcaCompressor {
     std::vector<std::uint8_t> changed(N_, 0);
     ForChunks([&] { ForBlocks(local(), [&](std::size_t b, std::size_t count) {
       const Eigen::Index w = static_cast<Eigen::Index>(count);
-      const Eigen::MatrixXf P = A_.middleRows(static_cast<Eigen::Index>(b), w) * model.big.transpose();
+      RowMatrixXf X;
+      A_.Rows(b, count, X);
+      const Eigen::MatrixXf P = X * model.big.transpose();
       for (Eigen::Index i = 0; i < w; ++i) {
         const std::size_t ti = t0_ + b + static_cast<std::size_t>(i);
         const int arg = model.Best(P, i, norms_[Eigen::Index(ti)], assign[ti], &residual_[ti]);
@@ -1190,7 +1340,7 @@ class LpcaCompressor {
   std::size_t chunk_ = 0;
   std::vector<double> chunk_norms_;  // squared norms of A_'s rows
   int K_ = 0;
-  RowMatrixXf A_;               // this rank's texels' rows
+  TexelMatrix A_;               // this rank's texels' rows
   Eigen::VectorXd norms_;       // every texel's squared norm
   double total_ = 0;
   double residual_energy_ = 0;

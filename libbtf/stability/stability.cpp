@@ -135,12 +135,15 @@ struct RoundTrip {
 };
 
 // Compress + decode + compare (metrics refuse NaN/Inf, so a non-finite decode fails loudly).
-RoundTrip Roundtrip(const Dataset& d, CodecMethod method, int components, int clusters, bool log_transform = false) {
+// lpca_matrix: LPCA's texel matrix ("half", the default, rounds the input by up to 2^-11).
+RoundTrip Roundtrip(const Dataset& d, CodecMethod method, int components, int clusters, bool log_transform = false,
+                    const std::string& lpca_matrix = "half") {
   CompressOptions o;
   o.method = method;
   o.components = components;
   o.clusters = std::max(clusters, 1);  // pca-view ignores it
   o.log_transform = log_transform;
+  o.lpca_matrix = lpca_matrix;
   RoundTrip r;
   Codec codec;
   r.summary = Compress(o, *MemorySource(d), &codec);
@@ -157,20 +160,27 @@ std::string MethodLabel(CodecMethod m, int c, int k) {
   return m == CodecMethod::kLpca ? fmt::format("lpca k={} c={}", k, c) : fmt::format("pca-view c={}", c);
 }
 
-// Round trips of both methods must be finite with relative L2 error <= bound.
+// The half texel matrix's rounding of LPCA's input, relative: lossless data come back within it.
+constexpr double kHalfMatrixRounding = 1.0 / 2048;
+
+// Round trips of both methods must be finite with relative L2 error <= bound; LPCA with the float
+// texel matrix, and with the default half one within max(bound, 2^-11).
 Outcome RoundTripsWithin(const Dataset& d, double bound, const std::vector<std::tuple<CodecMethod, int, int>>& settings) {
   Outcome o{true, ""};
-  for (const auto& [m, c, k] : settings) {
-    const RoundTrip r = Roundtrip(d, m, c, k);
-    const double rel = r.errors.rel_l2 ? *r.errors.rel_l2 : std::numeric_limits<double>::infinity();
-    const bool ok = r.non_finite == 0 && rel <= bound;
-    o.passed = o.passed && ok;
-    o.figure += fmt::format("{}{}: {}", o.figure.empty() ? "" : "; ", MethodLabel(m, c, k),
-                            r.non_finite ? fmt::format("{} non-finite decoded values", r.non_finite)
-                                         : fmt::format("rel L2 {:.3g}, max abs {:.3g}, stored c {}{}", rel,
-                                                       r.errors.max_abs, r.summary.components,
-                                                       r.summary.warnings.empty() ? "" : " (clamped/dropped, warned)"));
-  }
+  for (const auto& [m, c, k] : settings)
+    for (const std::string matrix : {"float", "half"}) {
+      if (m != CodecMethod::kLpca && matrix == "half") continue;
+      const RoundTrip r = Roundtrip(d, m, c, k, false, matrix);
+      const double rel = r.errors.rel_l2 ? *r.errors.rel_l2 : std::numeric_limits<double>::infinity();
+      const bool ok = r.non_finite == 0 && rel <= (matrix == "half" ? std::max(bound, kHalfMatrixRounding) : bound);
+      o.passed = o.passed && ok;
+      o.figure += fmt::format("{}{}{}: {}", o.figure.empty() ? "" : "; ", MethodLabel(m, c, k),
+                              m == CodecMethod::kLpca ? " " + matrix : "",
+                              r.non_finite ? fmt::format("{} non-finite decoded values", r.non_finite)
+                                           : fmt::format("rel L2 {:.3g}, max abs {:.3g}, stored c {}{}", rel,
+                                                         r.errors.max_abs, r.summary.components,
+                                                         r.summary.warnings.empty() ? "" : " (clamped/dropped, warned)"));
+    }
   return o;
 }
 
@@ -326,7 +336,7 @@ Outcome CompressSingleViewOrLight() {
 
 Outcome CompressMoreClustersThanTexels() {
   const Dataset d = MakeData(3, 4, 2, [](int v, int l, int y, int x, int c) { return 0.2 + Noise(v, l, y, x, c); });
-  const RoundTrip r = Roundtrip(d, CodecMethod::kLpca, 2, 32);
+  const RoundTrip r = Roundtrip(d, CodecMethod::kLpca, 2, 32, false, "float");
   const double rel = r.errors.rel_l2.value_or(1e30);
   const bool ok = r.non_finite == 0 && r.summary.clusters == 4 && !r.summary.warnings.empty() && rel <= 1e-5;
   return Outcome{ok, fmt::format("stored clusters {}, {} warning(s), rel L2 {:.3g}, {} non-finite", r.summary.clusters,
@@ -413,20 +423,20 @@ std::vector<Case> Cases() {
                    "reference 1e-6..1e4 against reference x (1 + 1e-3): rel L2 = 1e-3 within 1e-6, PSNR finite",
                    [](Path) { return MetricsHugeDynamicRange(); }});
   cases.push_back({"compress/rank-1", "compress",
-                   "rank-1 data (texel x direction x channel factors): c = 1 and c = 8 reconstruct to rel L2 <= 1e-5",
+                   "rank-1 data (texel x direction x channel factors): c = 1 and c = 8 reconstruct to rel L2 <= 1e-5 (lpca: float texel matrix; the default half one within 2^-11)",
                    [](Path) { return CompressRank1(); }});
   cases.push_back({"compress/constant", "compress",
-                   "constant 0.37 and all-zero data: every codec reconstructs with rel L2 <= 1e-6, nothing non-finite",
+                   "constant 0.37 and all-zero data: every codec reconstructs with rel L2 <= 1e-6, nothing non-finite (lpca: float texel matrix; the default half one within 2^-11)",
                    [](Path) { return CompressConstant(); }});
   cases.push_back({"compress/near-duplicate-texels", "compress",
-                   "all texels equal up to 1e-7 relative noise, lpca k=8 and pca-view: rel L2 <= 1e-5, finite",
+                   "all texels equal up to 1e-7 relative noise, lpca k=8 and pca-view: rel L2 <= 1e-5, finite (lpca: float texel matrix; the default half one within 2^-11)",
                    [](Path) { return CompressNearDuplicateTexels(); }});
   cases.push_back({"compress/single-view-or-light", "compress",
                    "1 view x 6 lights and 5 views x 1 light, c = 32 (clamped to what the data allows, so lossless): "
-                   "rel L2 <= 1e-5, finite",
+                   "rel L2 <= 1e-5, finite (lpca: float texel matrix; the default half one within 2^-11)",
                    [](Path) { return CompressSingleViewOrLight(); }});
   cases.push_back({"compress/k-greater-than-texels", "compress",
-                   "2x2 texels with lpca k = 32: clamped to 4 clusters with a warning, rel L2 <= 1e-5, finite",
+                   "2x2 texels with lpca k = 32: clamped to 4 clusters with a warning, rel L2 <= 1e-5, finite (float texel matrix)",
                    [](Path) { return CompressMoreClustersThanTexels(); }});
   for (const char* bad : {"NaN", "Inf"}) {
     const std::string b = bad;

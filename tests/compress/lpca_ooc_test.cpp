@@ -23,45 +23,54 @@ struct ScopedMaxBytes {
   ~ScopedMaxBytes() { unsetenv("BTF_MAX_BYTES"); }
 };
 
-// 2 views x 3 lights, 96^2 texels, RGB: a texel matrix of 9216 x 18 floats = 663,552 bytes; four
+// 2 views x 3 lights, 96^2 texels, RGB: a float texel matrix of 9216 x 18 floats = 663,552 bytes; four
 // materials of rank 2 (the ground truth LPCA should find). More texels than the 8192-texel
 // k-means sample (589,824 bytes), which must fit the limit: otherwise the sample is the matrix.
 Dataset Input() { return test::ClusteredLowRank(test::BonnSubset(2, 13), test::BonnSubset(3, 7), 96, 96, 4, 2); }
-// Between the sample and the matrix: out of core in 3 chunks of 4352 texels (the budget, half of
-// it, holds 4444 rows).
+// Between the sample and the float matrix: out of core in 3 chunks of 4352 texels (the budget,
+// half of it, holds 4444 float rows; 2 chunks of 8704 texels with the half matrix). The byte
+// arithmetic of these tests is for the float matrix (--lpca-matrix float) unless they say half.
 constexpr std::uint64_t kLimit = 640000;
 
-CompressOptions Lpca(int k, const std::string& memory) {
+CompressOptions Lpca(int k, const std::string& memory, const std::string& matrix = "float") {
   CompressOptions o;
   o.method = CodecMethod::kLpca;
   o.clusters = k;
   o.components = 3;
   o.lpca_memory = memory;
+  o.lpca_matrix = matrix;
   return o;
 }
 
 TEST(LpcaOutOfCore, EqualsInCoreAndRecoversTheGroundTruth) {
   const Dataset d = Input();
-  CompressSummary in, out;
-  const Codec a = test::CompressDataset(d, Lpca(8, "in-core"), &in);
-  Codec b;
-  {
-    const ScopedMaxBytes limit(kLimit);
-    b = test::CompressDataset(d, Lpca(8, "out-of-core"), &out);
+  for (const std::string matrix : {"float", "half"}) {
+    SCOPED_TRACE(matrix);
+    CompressSummary in, out;
+    const Codec a = test::CompressDataset(d, Lpca(8, "in-core", matrix), &in);
+    Codec b;
+    {
+      const ScopedMaxBytes limit(kLimit);
+      b = test::CompressDataset(d, Lpca(8, "out-of-core", matrix), &out);
+    }
+    EXPECT_EQ(in.lpca_memory, "in-core");
+    EXPECT_EQ(out.lpca_memory, "out-of-core");
+    EXPECT_EQ(out.lpca_matrix, matrix);
+    test::ExpectSameCodec(a, b);
+    EXPECT_EQ(in.iteration_errors, out.iteration_errors);
+    EXPECT_EQ(in.relative_error, out.relative_error);
+    // 4 rank-2 materials, 8 clusters of 3 components: float, exact up to float rounding (relative
+    // 1e-5 is ~100 float epsilons of the 108-value ABRDFs' reconstruction). Half: fitted to the
+    // half-rounded input, measured against the input: the rounding (each value within 2^-11
+    // relative; the residual is within 2 x 2^-11 of the norm) stays. Measured 9.6e-5, bound 2^-11
+    // = 4.9e-4 (5x margin).
+    EXPECT_LT(out.relative_error, matrix == "float" ? 1e-5 : 1.0 / 2048) << matrix;
+    // In core: the matrix once and the error pass. Out of core, per phase >= 2 chunk passes (norms,
+    // first assignment, each reassignment), one sample pass and >= 1 wave pass per cluster fit.
+    EXPECT_EQ(in.lpca_passes, 2);
+    EXPECT_GE(out.lpca_passes, 2 + 1 + 2 + 1 + 1);
+    EXPECT_GT(out.peak_rss_bytes, 0u);
   }
-  EXPECT_EQ(in.lpca_memory, "in-core");
-  EXPECT_EQ(out.lpca_memory, "out-of-core");
-  test::ExpectSameCodec(a, b);
-  EXPECT_EQ(in.iteration_errors, out.iteration_errors);
-  EXPECT_EQ(in.relative_error, out.relative_error);
-  // 4 rank-2 materials, 8 clusters of 3 components: exact up to float rounding (relative 1e-5
-  // is ~100 float epsilons of the 108-value ABRDFs' reconstruction).
-  EXPECT_LT(out.relative_error, 1e-5);
-  // In core: the matrix once and the error pass. Out of core, per phase 3 chunk passes (norms,
-  // first assignment, each reassignment), one sample pass and >= 1 wave pass per cluster fit.
-  EXPECT_EQ(in.lpca_passes, 2);
-  EXPECT_GE(out.lpca_passes, 3 + 1 + 3 + 1 + 1);
-  EXPECT_GT(out.peak_rss_bytes, 0u);
 }
 
 TEST(LpcaOutOfCore, AutoStreamsWhereInCoreIsRefused) {
@@ -114,6 +123,47 @@ TEST(LpcaOutOfCore, CheckNamesTheField) {
   CompressOptions o = Lpca(8, "swap");
   const std::string e = test::ErrorOf([&] { o.Check(); });
   EXPECT_NE(e.find("lpca_memory"), std::string::npos) << e;
+  o = Lpca(8, "auto", "double");
+  const std::string m = test::ErrorOf([&] { o.Check(); });
+  EXPECT_NE(m.find("lpca_matrix"), std::string::npos) << m;
+}
+
+// The half texel matrix halves LPCA's largest allocation; its rounding (2^-11 relative at most)
+// must cost little against LPCA's own error. Clusters without a clean structure (noise 5 %), so
+// that the error is LPCA's, not the rounding's.
+TEST(LpcaHalfMatrix, ErrorStaysWithinTheRoundingOfTheFloatPath) {
+  const Dataset d = test::PerViewLowRank(test::BonnSubset(4), test::BonnSubset(5), 24, 24, 6, 0.05);
+  CompressOptions o = Lpca(5, "in-core", "float");
+  o.components = 2;
+  CompressSummary f, h;
+  test::CompressDataset(d, o, &f);
+  o.lpca_matrix = "half";
+  test::CompressDataset(d, o, &h);
+  EXPECT_EQ(f.lpca_matrix, "float");
+  EXPECT_EQ(h.lpca_matrix, "half");
+  // The residuals of the two fits differ by the rounding, at most 2^-11 of the norm each way, plus
+  // what a different clustering of the rounded input changes. Measured: float 0.166846, half
+  // 0.166862 (difference 1.6e-5); bound 2^-11 = 4.9e-4 of the norm (30x margin).
+  EXPECT_NEAR(h.relative_error, f.relative_error, 1.0 / 2048) << f.relative_error << " " << h.relative_error;
+}
+
+// A transformed value beyond the half range (65504) cannot be held: refused, naming the value and
+// the float matrix; the float matrix takes it.
+TEST(LpcaHalfMatrix, RefusesAValueBeyondTheHalfRangeAndFloatTakesIt) {
+  Dataset d = Input();
+  d.at(1, 2, 5, 7, 1) = 70000;
+  ExitCode code{};
+  const std::string e = test::ErrorOf([&] { test::CompressDataset(d, Lpca(8, "in-core", "half")); }, &code);
+  EXPECT_EQ(code, ExitCode::kBadInput) << e;
+  for (const char* part : {"70000", "view 1, light 2, texel (y 5, x 7), channel 1", "65504", "--lpca-matrix float"})
+    EXPECT_NE(e.find(part), std::string::npos) << part << ": " << e;
+  CompressSummary s;
+  test::CompressDataset(d, Lpca(8, "in-core", "float"), &s);
+  EXPECT_EQ(s.lpca_matrix, "float");
+  // Out of core (whole slots are read on every pass): the same refusal.
+  const ScopedMaxBytes limit(kLimit);
+  const std::string o = test::ErrorOf([&] { test::CompressDataset(d, Lpca(8, "out-of-core", "half")); });
+  EXPECT_NE(o.find("--lpca-matrix float"), std::string::npos) << o;
 }
 
 }  // namespace

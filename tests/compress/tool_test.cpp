@@ -19,13 +19,14 @@ TEST(BtfCompressTool, CompressDecodeExportAndInfo) {
   WriteDataset(dir / "d.h5", d);
   std::string out;
   ASSERT_EQ(test::RunCommand(test::Tool("btf-compress") + " " + Q(dir / "d.h5") +
-                                 " --method lpca -k 2 -c 2 -o " + Q(dir / "c.h5") + " --json --quiet",
+                                 " --method lpca --lpca-matrix float -k 2 -c 2 -o " + Q(dir / "c.h5") + " --json --quiet",
                              &out),
             0)
       << out;
   const auto j = nlohmann::json::parse(out);
   EXPECT_EQ(j["method"], "lpca");
-  EXPECT_LT(j["relative_error"].get<double>(), 1e-5);  // exact model: float rounding only
+  EXPECT_LT(j["relative_error"].get<double>(), 1e-5);  // exact model, float texel matrix: float rounding only
+  EXPECT_EQ(j["lpca_memory"]["matrix"], "float");
   EXPECT_EQ(j["psnr_peak_definition"], "max |input value|");
   EXPECT_TRUE(j["seconds"].contains("iterate"));
   ASSERT_EQ(test::RunCommand(test::Tool("btf-compress") + " decode " + Q(dir / "c.h5") + " -o " + Q(dir / "back.h5") +

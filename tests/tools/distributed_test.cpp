@@ -227,14 +227,15 @@ TEST(Distributed, LpcaWithASampledSeedingIsTheSameForOneToFourRanks) {
 
 // BTF_MAX_BYTES applies per rank: an LPCA whose texel-major matrix is over the limit is refused
 // by one process (exit 3, naming the limit) and succeeds with 4 ranks, each holding a quarter
-// of the texels (and rank 0 the 8192-texel sample, half of them).
+// of the texels (and rank 0 the 8192-texel sample, half of them). The float matrix: the default
+// half one (2 bytes a value) would fit one process.
 TEST(Distributed, LpcaOverOneRanksMemoryLimitSucceedsWithFourRanks) {
   REQUIRE_MPI();
   const fs::path dir = test::TempDir();
   const std::string in = SynthInput(dir, " btf --views 0-2 --lights 0-2 --resolution 128 --samples 1");
   const double matrix = 4.0 * 128 * 128 * 3 * 3 * 3;  // texels x (views x lights x channels) floats
   const std::string limit = fmt::format("BTF_MAX_BYTES={} ", std::uint64_t(0.6 * matrix));
-  const std::string flags = " --method lpca --clusters 4 --components 2 --max-iterations 3 --quiet";
+  const std::string flags = " --method lpca --lpca-matrix float --clusters 4 --components 2 --max-iterations 3 --quiet";
   std::string out;
   const fs::path one = dir / "one.h5", four = dir / "four.h5";
   const int rc1 = test::RunCommand(limit + test::Tool("btf-compress") + " " + in + flags + " -o " + one.string() + " 2>&1", &out);

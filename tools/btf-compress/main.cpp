@@ -118,6 +118,8 @@ int main(int argc, char** argv) {
   app.add_option("--max-iterations", co.max_iterations, "LPCA: PCA/reassignment rounds at most");
   app.add_option("--lpca-memory", co.lpca_memory,
                  "LPCA: auto (out of core above the memory limit), in-core or out-of-core (stream the view slots)");
+  app.add_option("--lpca-matrix", co.lpca_matrix,
+                 "LPCA: storage of the texel-major matrix, half (2 bytes a value, |x| <= 65504) or float");
   app.add_option("--min-improvement", co.min_improvement, "LPCA: stop when a round improves the error by less");
   app.add_option("--lpca-sample", co.lpca_sample,
                  "LPCA: texels of the k-means sample; smaller than the texels: local-PCA rounds on it first");
