@@ -217,13 +217,14 @@ def test_compress_matches_btf_compress(data):
     t = tool_json("btf-compress", data["gt"], "--method", "lpca-tensor", "-k", 2, "-c", 3, "--quant-bits", 8,
                   "--tensor-growth", 0.5, "-o", d / "tensor_tool.h5")
     assert s["codec_bytes"] == t["codec_bytes"] and s["storage"] == t["storage"]
-    # LPCA's memory mode and k-means sample: a 40-texel sample (fewer than the texels, so the
+    # LPCA's memory mode, k-means sample and texel matrix: a 40-texel sample (fewer than the texels, so the
     # sample rounds run) out of core gives the tool's codec with the same flags, value for value.
     s = libbtf.compress(data["gt"], d / "ooc.h5", method="lpca", clusters=2, components=3, lpca_memory="out-of-core",
-                        lpca_sample=40)
+                        lpca_sample=40, lpca_matrix="float")
     t = tool_json("btf-compress", data["gt"], "--method", "lpca", "-k", 2, "-c", 3, "--lpca-memory", "out-of-core",
-                  "--lpca-sample", 40, "-o", d / "ooc_tool.h5")
+                  "--lpca-sample", 40, "--lpca-matrix", "float", "-o", d / "ooc_tool.h5")
     assert s["lpca_memory"]["mode"] == t["lpca_memory"]["mode"] == "out-of-core" and s["codec_bytes"] == t["codec_bytes"]
+    assert s["lpca_memory"]["matrix"] == t["lpca_memory"]["matrix"] == "float"
     np.testing.assert_array_equal(libbtf.open(d / "ooc.h5").read_all(), libbtf.open(d / "ooc_tool.h5").read_all())
     half = libbtf.compress(data["gt"], d / "half.h5", method="pca-view", components=4, storage="half")
     s = libbtf.compress(data["gt"], d / "budget.h5", method="pca-view", components=4, storage="half",
