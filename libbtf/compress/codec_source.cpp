@@ -22,7 +22,6 @@ class CodecSlotSource final : public SlotSource {
   DatasetInfo info() const override { return codec_.info(); }
   void ReadViewSlot(int view, float* out) const override { codec_.DecodeViewSlot(view, out); }
   void ReadImage(int view, int light, float* out) const override { codec_.DecodeImage(view, light, out); }
-  bool computes_slots() const override { return true; }
 
  private:
   Codec codec_;

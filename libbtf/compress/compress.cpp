@@ -75,7 +75,6 @@ class SceneSlotSource final : public SlotSource {
   int width() const override { return in_.width() / block_; }
   int channels() const override { return static_cast<int>(channel_index_.size()); }
   DatasetInfo info() const override { return info_; }
-  bool computes_slots() const override { return in_.computes_slots(); }
   void ReadViewSlot(int v, float* dst) const override {
     std::vector<float> buf(in_.slot_size());
     in_.ReadViewSlot(view_index_[static_cast<std::size_t>(v)], buf.data());

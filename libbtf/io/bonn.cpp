@@ -797,7 +797,6 @@ class BonnSlotSource final : public SlotSource {
   int channels() const override { return reader_.header().channels(); }
   DatasetInfo info() const override { return reader_.header().Info(); }
   void ReadViewSlot(int view, float* out) const override { reader_.ReadViewSlot(view, out); }
-  bool computes_slots() const override { return reader_.header().format != BonnFormat::kBdi; }
 
  private:
   BonnReader reader_;

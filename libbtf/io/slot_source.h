@@ -29,10 +29,6 @@ class SlotSource {
   virtual void ReadViewSlot(int view, float* out) const = 0;
   // height x width x channels floats (default: reads the view slot and copies one image).
   virtual void ReadImage(int view, int light, float* out) const;
-  // True when ReadViewSlot computes the slot from stored factors (a Bonn DFMF/FMF/PVF file, a
-  // codec) instead of reading stored values: there is no I/O to overlap, so a consumer gains
-  // nothing by reading ahead and should hold one slot at a time.
-  virtual bool computes_slots() const { return false; }
 
   std::size_t image_size() const { return std::size_t(height()) * width() * channels(); }
   std::size_t slot_size() const { return image_size() * std::size_t(lights().size()); }

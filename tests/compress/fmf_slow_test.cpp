@@ -43,7 +43,6 @@ class FirstViews final : public SlotSource {
   int channels() const override { return in_.channels(); }
   DatasetInfo info() const override { return in_.info(); }
   void ReadViewSlot(int v, float* out) const override { in_.ReadViewSlot(v, out); }
-  bool computes_slots() const override { return in_.computes_slots(); }
 
  private:
   const SlotSource& in_;
