@@ -1,11 +1,11 @@
 // The compressors: per-view PCA (streamed slot by slot) and local PCA (texel-major matrix,
 // reassignment in texel blocks).
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <fstream>
-#include <atomic>
-#include <mutex>
 #include <limits>
+#include <mutex>
 #include <numeric>
 #include <random>
 #include <type_traits>
@@ -699,15 +699,13 @@ class LpcaCompressor {
     ForBlocks(m, [&](std::size_t first, std::size_t count) {
       const Eigen::Index w = static_cast<Eigen::Index>(count);
       Eigen::MatrixXf P;
-      if (rows) {
+      bool direct = false;  // consecutive float rows: the GEMM reads M itself
+      if constexpr (std::is_same_v<Mat, RowMatrixXf>)
+        if (!rows) P.noalias() = M.middleRows(static_cast<Eigen::Index>(first), w) * centers.transpose(), direct = true;
+      if (!direct) {
         RowMatrixXf X(w, M.cols());
-        for (Eigen::Index i = 0; i < w; ++i) RowToFloat(M, static_cast<Eigen::Index>(rows[first + std::size_t(i)]), X.row(i).data());
-        P.noalias() = X * centers.transpose();
-      } else if constexpr (std::is_same_v<Mat, RowMatrixXf>) {
-        P.noalias() = M.middleRows(static_cast<Eigen::Index>(first), w) * centers.transpose();
-      } else {
-        RowMatrixXf X(w, M.cols());
-        for (Eigen::Index i = 0; i < w; ++i) RowToFloat(M, static_cast<Eigen::Index>(first) + i, X.row(i).data());
+        for (Eigen::Index i = 0; i < w; ++i)
+          RowToFloat(M, static_cast<Eigen::Index>(rows ? rows[first + std::size_t(i)] : first + std::size_t(i)), X.row(i).data());
         P.noalias() = X * centers.transpose();
       }
       for (Eigen::Index i = 0; i < w; ++i) {
