@@ -549,9 +549,11 @@ class LpcaCompressor {
   // transformed ABRDF; with a half matrix, float rows get the half-rounded values, so that the
   // rows gathered out of core equal the in-core matrix's. Per slot, the transpose runs over tiles
   // of texels (one per thread at a time): for each light, the tile's values are one contiguous run
-  // of the slot, written to the tile's rows.
+  // of the slot, written to the tile's rows. norms (optional): norms[i] = the squared norm of row
+  // i as stored (half-rounded with a half matrix), summed in double in (view, light, channel)
+  // order by the thread that writes the row, so without a pass of its own over the matrix.
   template <typename T>
-  void ReadRows(const std::vector<std::size_t>& texels, const std::vector<T*>& rows) const {
+  void ReadRows(const std::vector<std::size_t>& texels, const std::vector<T*>& rows, double* norms = nullptr) const {
     static_assert(std::is_same_v<T, float> || std::is_same_v<T, std::uint16_t>);
     BTF_CHECK((std::is_same_v<T, float> || half()));
     const int V = in_.views().size(), L = in_.lights().size(), C = in_.channels();
@@ -561,12 +563,15 @@ class LpcaCompressor {
     const T* src;
     if constexpr (std::is_same_v<T, float>) src = slot.data();
     else src = halves.data();
+    if (norms) std::fill(norms, norms + texels.size(), 0.0);
     for (int v = 0; v < V; ++v) {
       rep_.Progress(std::size_t(v), std::size_t(V), "read");
       in_.ReadViewSlot(v, slot.data());
-      CheckFiniteSlot(in_, v, slot.data());
+      // With a half matrix and no log, ToHalves' range check also finds NaN and Inf (and then
+      // names them as CheckFiniteSlot does), so the slot is not scanned twice.
+      if (tr_.log || !half()) CheckFiniteSlot(in_, v, slot.data());
       tr_.Apply(in_, v, slot.data(), slot.size());
-      if (half()) ToHalves(v, slot, halves, std::is_same_v<T, float>);
+      if (half()) ToHalves(v, slot, halves, std::is_same_v<T, float> || norms);
       // channels: a compile-time 3 (RGB: the copy inlined, no memmove call per value run) or C.
       const auto transpose = [&](auto channels) {
         const std::size_t cc = channels;
@@ -578,6 +583,13 @@ class LpcaCompressor {
             const std::size_t at = (std::size_t(v) * L + l) * cc;
             for (std::size_t i = i0; i < i1; ++i)
               for (std::size_t c = 0; c < cc; ++c) rows[i][at + c] = from[texels[i] * cc + c];
+            if (!norms) continue;
+            const float* value = slot.data() + std::size_t(l) * N_ * cc;  // the stored values, as float
+            for (std::size_t i = i0; i < i1; ++i)
+              for (std::size_t c = 0; c < cc; ++c) {
+                const double x = value[texels[i] * cc + c];
+                norms[i] += x * x;
+              }
           }
         }
       };
@@ -588,7 +600,8 @@ class LpcaCompressor {
   }
 
   // halves = slot as half bits, in threads over static ranges; slot = their values if `round`. A
-  // value beyond the half range is refused, naming it (every rank reads whole slots: all refuse).
+  // NaN or Inf is refused as CheckFiniteSlot refuses it, a value beyond the half range naming it
+  // (every rank reads whole slots: all refuse).
   void ToHalves(int v, std::vector<float>& slot, std::vector<std::uint16_t>& halves, bool round) const {
     constexpr std::size_t kRange = 1 << 16;
     const std::ptrdiff_t ranges = static_cast<std::ptrdiff_t>((slot.size() + kRange - 1) / kRange);
@@ -611,6 +624,7 @@ class LpcaCompressor {
       }
       return;
     }
+    if (!tr_.log) CheckFiniteSlot(in_, v, slot.data());  // after the log, the slot is finite
     const std::size_t i = std::size_t(std::find_if(halves.begin(), halves.end(), [](std::uint16_t h) {
                                         return (h & 0x7c00u) == 0x7c00u;
                                       }) - halves.begin());
@@ -626,21 +640,16 @@ class LpcaCompressor {
     A_.Resize(local(), d_, half());
     std::vector<std::size_t> texels(local());
     std::iota(texels.begin(), texels.end(), t0_);
+    chunk_norms_.resize(local());
     if (half()) {
       std::vector<std::uint16_t*> rows(local());
       for (std::size_t i = 0; i < local(); ++i) rows[i] = A_.HalfRow(i);
-      ReadRows(texels, rows);
+      ReadRows(texels, rows, chunk_norms_.data());
     } else {
       std::vector<float*> rows(local());
       for (std::size_t i = 0; i < local(); ++i) rows[i] = A_.FloatRow(i);
-      ReadRows(texels, rows);
+      ReadRows(texels, rows, chunk_norms_.data());
     }
-    chunk_norms_.resize(local());
-    ForBlocks(local(), [&](std::size_t first, std::size_t count) {
-      RowMatrixXf X;
-      A_.Rows(first, count, X);
-      for (Eigen::Index i = 0; i < X.rows(); ++i) chunk_norms_[first + std::size_t(i)] = X.row(i).cast<double>().squaredNorm();
-    });
   }
 
   // Runs f() with A_ holding the rows of texels [t0_, t1_): in core once (A_ holds this rank's
