@@ -175,13 +175,17 @@ PcaResult GramPca(const RowMatrixXf& Xc, PcaResult r, const PcaRequest& q, int l
 // Z = Xc^T Q (summed block by block) and Y = Xc Qz; B = Q^T Xc; scores = Xc basis^T.
 PcaResult RandomizedPca(const PcaRows& X, PcaResult r, const PcaRequest& q, const RowMatrixXf* start, int limit) {
   const Eigen::Index n = X.rows, d = X.cols;
+  constexpr Eigen::Index kRun = 8;  // rows read and centred together, while they are in L2
   RowMatrixXf T;
   // f(first, T) for each block of rows [first, first + T.rows()), centred once the mean is known.
   auto pass = [&](bool centre, auto&& f) {
     for (Eigen::Index b = 0; b < n; b += kPcaBlockRows) {
       T.resize(std::min(kPcaBlockRows, n - b), d);
-      X.get(b, T.rows(), T.data());
-      if (centre) T.rowwise() -= r.mean.transpose();
+      for (Eigen::Index i = 0; i < T.rows(); i += kRun) {
+        const Eigen::Index m = std::min(kRun, T.rows() - i);
+        X.get(b + i, m, T.row(i).data());
+        if (centre) T.middleRows(i, m).rowwise() -= r.mean.transpose();
+      }
       f(b, T);
     }
   };

@@ -199,9 +199,9 @@ TEST(Pca, RowsInBlocksGiveTheSameBytesAndTheRandomizedPathHoldsOneBlock) {
       EXPECT_EQ(blocks.residual_energy, whole.residual_energy);
       EXPECT_TRUE(in_order);
       if (n == 300) {
-        // One block at a time; the passes: moments, centring with Xc Omega, per subspace iteration
-        // Xc^T Q and Xc Qz (2 cold, 1 warm), Q^T Xc, the scores.
-        EXPECT_EQ(largest, kPcaBlockRows);
+        // At most one block at a time (read in runs of a few rows); the passes: moments, centring
+        // with Xc Omega, per subspace iteration Xc^T Q and Xc Qz (2 cold, 1 warm), Q^T Xc, the scores.
+        EXPECT_LE(largest, kPcaBlockRows);
         EXPECT_EQ(requested, n * (warm ? 6 : 8));
       } else {
         EXPECT_EQ(largest, n);  // the Gram path: all rows at once, once
