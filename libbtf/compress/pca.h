@@ -50,8 +50,8 @@ inline constexpr double kNullEigenvalueFraction = 1e-10;
 // warm_power_iterations subspace iterations instead of power_iterations.
 PcaResult Pca(const Eigen::Ref<const RowMatrixXf>& X, const PcaRequest& request, const RowMatrixXf* start = nullptr);
 
-// Rows handed out in blocks: the randomized path reads blocks of this many rows (the last one
-// shorter), one at a time, in row order, once per pass.
+// The randomized path over PcaRows holds blocks of this many rows (the last one shorter), one at
+// a time, in row order, once per pass; it asks for them in runs of a few rows.
 inline constexpr Eigen::Index kPcaBlockRows = 128;
 
 // An n x d matrix (rows x cols) whose rows get(first, count, out) writes as float to out
