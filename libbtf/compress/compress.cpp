@@ -916,9 +916,12 @@ class LpcaCompressor {
       omp_set_num_threads(1);  // Eigen sequential in this cluster's task
       const int k = order_k[static_cast<std::size_t>(kk)];
       const auto& m = members[static_cast<std::size_t>(k)];
-      RowMatrixXf x(static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d_));
-      for (std::size_t i = 0; i < m.size(); ++i) RowToFloat(M, static_cast<Eigen::Index>(rows[m[i]]), x.row(Eigen::Index(i)).data());
-      PcaResult p = PcaInPlace(x, MakeRequest(o_, std::uint64_t(k)), WarmStart(prev ? &prev->pca : nullptr, k));
+      const PcaRows x{static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d_),
+                      [&](Eigen::Index first, Eigen::Index count, float* out) {
+                        for (Eigen::Index i = 0; i < count; ++i)
+                          RowToFloat(M, static_cast<Eigen::Index>(rows[m[std::size_t(first + i)]]), out + std::size_t(i) * d_);
+                      }};
+      PcaResult p = Pca(x, MakeRequest(o_, std::uint64_t(k)), WarmStart(prev ? &prev->pca : nullptr, k));
       p.scores.resize(0, 0);
       f.pca[static_cast<std::size_t>(k)] = std::move(p);
     }
@@ -1191,11 +1194,21 @@ class LpcaCompressor {
         omp_set_num_threads(1);  // Eigen sequential in this cluster's task
         const int k = list[static_cast<std::size_t>(kk)];
         const auto& m = members[static_cast<std::size_t>(k)];
+        const PcaRequest q = MakeRequest(o_, std::uint64_t(k));
+        if (R_ == 1 && !ooc_) {  // in core, one process: the rows come from A_ a block at a time
+          const PcaRows rows{static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d_),
+                             [&](Eigen::Index first, Eigen::Index count, float* out) {
+                               for (Eigen::Index i = 0; i < count; ++i)
+                                 A_.CopyRow(m[std::size_t(first + i)], out + std::size_t(i) * d_);
+                             }};
+          f.pca[static_cast<std::size_t>(k)] = Pca(rows, q, WarmStart(warm, k));
+          continue;
+        }
         RowMatrixXf& x = X[static_cast<std::size_t>(k)];
         if (x.rows() == 0) x.resize(static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d_));
         for (std::size_t i = 0; i < m.size() && !ooc_; ++i)
           if (m[i] >= t0_ && m[i] < t1_) A_.CopyRow(m[i] - t0_, x.row(Eigen::Index(i)).data());
-        f.pca[static_cast<std::size_t>(k)] = PcaInPlace(x, MakeRequest(o_, std::uint64_t(k)), WarmStart(warm, k));
+        f.pca[static_cast<std::size_t>(k)] = Pca(x, q, WarmStart(warm, k));
         x.resize(0, 0);
       }
     }

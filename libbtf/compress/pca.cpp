@@ -17,37 +17,39 @@ namespace {
 using MatrixXd = Eigen::MatrixXd;
 constexpr Eigen::Index kBlock = 2048;  // columns/rows per double block (fits L2 with n <= 256)
 
-// Mean (double accumulation) and total energy of X's rows.
-void Moments(const Eigen::Ref<const RowMatrixXf>& X, PcaResult& r) {
-  const Eigen::Index n = X.rows(), d = X.cols();
-  Eigen::VectorXd mean = Eigen::VectorXd::Zero(d);
-  double total = 0;
-  for (Eigen::Index i = 0; i < n; ++i) {
+// Adds X's rows to `sum` and their squared norms to `total` (double), row by row in order.
+void AddMoments(const Eigen::Ref<const RowMatrixXf>& X, Eigen::VectorXd& sum, double& total) {
+  for (Eigen::Index i = 0; i < X.rows(); ++i) {
     const auto row = X.row(i).cast<double>();
-    mean += row.transpose();
+    sum += row.transpose();
     total += row.squaredNorm();
   }
-  mean /= double(n);
-  r.mean = mean.cast<float>();
-  r.total_energy = total;
 }
 
-// Xc = X - mean, row by row (Xc may be X: centred in place), and the centred energy (double),
+// Mean (double accumulation) and total energy of X's rows.
+void Moments(const Eigen::Ref<const RowMatrixXf>& X, PcaResult& r) {
+  Eigen::VectorXd sum = Eigen::VectorXd::Zero(X.cols());
+  r.total_energy = 0;
+  AddMoments(X, sum, r.total_energy);
+  r.mean = (sum / double(X.rows())).cast<float>();
+}
+
+// Xc = X - mean, row by row (Xc may be X: centred in place); returns the centred energy (double),
 // each row's norm taken while it is in cache.
-void CentreRows(const Eigen::Ref<const RowMatrixXf>& X, PcaResult& r, RowMatrixXf& Xc) {
+double CentreRows(const Eigen::Ref<const RowMatrixXf>& X, const Eigen::VectorXf& mean, RowMatrixXf& Xc) {
   if (Xc.data() != X.data()) Xc.resize(X.rows(), X.cols());
   double centered = 0;
   for (Eigen::Index i = 0; i < X.rows(); ++i) {
-    Xc.row(i) = X.row(i) - r.mean.transpose();
+    Xc.row(i) = X.row(i) - mean.transpose();
     centered += Xc.row(i).cast<double>().squaredNorm();
   }
-  r.centered_energy = centered;
+  return centered;
 }
 
 // Mean and centred copy; energies in double.
 void Center(const Eigen::Ref<const RowMatrixXf>& X, PcaResult& r, RowMatrixXf& Xc) {
   Moments(X, r);
-  CentreRows(X, r, Xc);
+  r.centered_energy = CentreRows(X, r.mean, Xc);
 }
 
 // Number of components to keep from eigenvalues sorted in decreasing order.
@@ -108,8 +110,9 @@ Eigen::MatrixXd Orth(const Eigen::MatrixXf& Y) {
   return qr.householderQ() * MatrixXd::Identity(Y.rows(), Y.cols());
 }
 
-void Finish(const RowMatrixXf& Xc, PcaResult& r) {
-  r.scores.noalias() = Xc * r.basis.transpose();
+// r.eigenvalues from r.scores (n x c: the centred rows times the basis), the residual, the signs.
+void FinishScores(PcaResult& r) {
+  r.eigenvalues.assign(static_cast<std::size_t>(r.basis.rows()), 0.0);
   double captured = 0;
   for (Eigen::Index k = 0; k < r.basis.rows(); ++k) {
     const double e = r.scores.col(k).cast<double>().squaredNorm();
@@ -120,25 +123,25 @@ void Finish(const RowMatrixXf& Xc, PcaResult& r) {
   NormalizeSigns(r.basis.data(), r.basis.rows(), r.basis.cols(), r.scores.data(), r.scores.rows());
 }
 
-// Pca on the centred rows Xc; r holds the mean and energies.
-PcaResult PcaOfCentred(const RowMatrixXf& Xc, PcaResult r, const PcaRequest& q, const RowMatrixXf* start) {
+void Finish(const RowMatrixXf& Xc, PcaResult& r) {
+  r.scores.noalias() = Xc * r.basis.transpose();
+  FinishScores(r);
+}
+
+// No components: the mean alone.
+PcaResult NoComponents(PcaResult r, Eigen::Index n, Eigen::Index d) {
+  r.basis.resize(0, d);
+  r.scores.resize(n, 0);
+  r.residual_energy = r.centered_energy;
+  return r;
+}
+
+// The Gram (n <= d) or covariance (n > d) path on the centred rows Xc; r holds the mean and energies.
+PcaResult GramPca(const RowMatrixXf& Xc, PcaResult r, const PcaRequest& q, int limit) {
   const Eigen::Index n = Xc.rows(), d = Xc.cols();
-  r.requested = q.max_components;
-  // n observations span at most n - 1 centered directions.
-  const int limit = static_cast<int>(std::min<Eigen::Index>(n - 1, d));
-  r.clamped_to = limit;
-  const Eigen::Index small = std::min(n, d);
-  const int want = std::min(q.max_components, limit);
-  const bool gram = small <= q.gram_limit || 2 * (want + q.oversampling) >= small;
-  const bool warm = !gram && start && start->rows() > 0 && start->cols() == d;
+  if (std::min(q.max_components, limit) <= 0 || r.centered_energy <= 0) return NoComponents(std::move(r), n, d);
   std::vector<double> eig;
-  if (want <= 0 || r.centered_energy <= 0) {
-    r.basis.resize(0, d);
-    r.scores.resize(n, 0);
-    r.residual_energy = r.centered_energy;
-    return r;
-  }
-  if (gram && n <= d) {
+  if (n <= d) {
     MatrixXd G = MatrixXd::Zero(n, n);
     for (Eigen::Index b = 0; b < d; b += kBlock) {
       const Eigen::Index w = std::min(kBlock, d - b);
@@ -150,7 +153,7 @@ PcaResult PcaOfCentred(const RowMatrixXf& Xc, PcaResult r, const PcaRequest& q, 
     for (Eigen::Index k = n - 1; k >= 0; --k) eig.push_back(std::max(0.0, es.eigenvalues()[k]));
     const int c = ChooseComponents(eig, q, r, limit);
     BasisFromLeft(Xc, U, eig, c, r);
-  } else if (gram) {
+  } else {
     MatrixXd C = MatrixXd::Zero(d, d);
     for (Eigen::Index b = 0; b < n; b += kBlock) {
       const Eigen::Index w = std::min(kBlock, n - b);
@@ -162,56 +165,108 @@ PcaResult PcaOfCentred(const RowMatrixXf& Xc, PcaResult r, const PcaRequest& q, 
     const int c = ChooseComponents(eig, q, r, limit);
     r.basis.resize(c, d);
     for (int k = 0; k < c; ++k) r.basis.row(k) = es.eigenvectors().col(d - 1 - k).cast<float>().transpose();
-  } else {
-    r.randomized = true;
-    const Eigen::Index rank = std::min<Eigen::Index>(want + q.oversampling, small);
-    std::mt19937_64 rng(q.seed);
-    std::normal_distribution<float> normal(0.0f, 1.0f);
-    Eigen::MatrixXf omega(d, rank);
-    const Eigen::Index warm_cols = warm ? std::min(start->rows(), rank) : 0;
-    if (warm_cols > 0) omega.leftCols(warm_cols) = start->topRows(warm_cols).transpose();
-    for (Eigen::Index j = warm_cols; j < rank; ++j)
-      for (Eigen::Index i = 0; i < d; ++i) omega(i, j) = normal(rng);
-    Eigen::MatrixXf Y = Xc * omega;
-    MatrixXd Q = Orth(Y);
-    for (int it = 0; it < (warm ? q.warm_power_iterations : q.power_iterations); ++it) {
-      const Eigen::MatrixXf Z = Xc.transpose() * Q.cast<float>();
-      const MatrixXd Qz = Orth(Z);
-      Y.noalias() = Xc * Qz.cast<float>();
-      Q = Orth(Y);
-    }
-    const RowMatrixXf B = Q.cast<float>().transpose() * Xc;  // rank x d
-    MatrixXd G = MatrixXd::Zero(rank, rank);
-    for (Eigen::Index b = 0; b < d; b += kBlock) {
-      const Eigen::Index w = std::min(kBlock, d - b);
-      const MatrixXd block = B.middleCols(b, w).cast<double>();
-      G.selfadjointView<Eigen::Lower>().rankUpdate(block);
-    }
-    Eigen::SelfAdjointEigenSolver<MatrixXd> es(G.selfadjointView<Eigen::Lower>());
-    const MatrixXd U = es.eigenvectors().rowwise().reverse();
-    for (Eigen::Index k = rank - 1; k >= 0; --k) eig.push_back(std::max(0.0, es.eigenvalues()[k]));
-    const int c = ChooseComponents(eig, q, r, limit);
-    BasisFromLeft(B, U, eig, c, r);
   }
-  r.eigenvalues.assign(static_cast<std::size_t>(r.basis.rows()), 0.0);
   Finish(Xc, r);
+  return r;
+}
+
+// The randomized path over X's rows in blocks of kPcaBlockRows (one block held at a time, centred
+// as it is read): moments; Y = Xc Omega with the centred energy; per subspace iteration
+// Z = Xc^T Q (summed block by block) and Y = Xc Qz; B = Q^T Xc; scores = Xc basis^T.
+PcaResult RandomizedPca(const PcaRows& X, PcaResult r, const PcaRequest& q, const RowMatrixXf* start, int limit) {
+  const Eigen::Index n = X.rows, d = X.cols;
+  constexpr Eigen::Index kRun = 8;  // rows read and centred together, while they are in L2
+  RowMatrixXf T;
+  // f(first, T) for each block of rows [first, first + T.rows()), centred once the mean is known.
+  auto pass = [&](bool centre, auto&& f) {
+    for (Eigen::Index b = 0; b < n; b += kPcaBlockRows) {
+      T.resize(std::min(kPcaBlockRows, n - b), d);
+      for (Eigen::Index i = 0; i < T.rows(); i += kRun) {
+        const Eigen::Index m = std::min(kRun, T.rows() - i);
+        X.get(b + i, m, T.row(i).data());
+        if (centre) T.middleRows(i, m).rowwise() -= r.mean.transpose();
+      }
+      f(b, T);
+    }
+  };
+  Eigen::VectorXd sum = Eigen::VectorXd::Zero(d);
+  pass(false, [&](Eigen::Index, const RowMatrixXf& x) { AddMoments(x, sum, r.total_energy); });
+  r.mean = (sum / double(n)).cast<float>();
+  r.randomized = true;
+  const int want = std::min(q.max_components, limit);
+  const Eigen::Index rank = std::min<Eigen::Index>(want + q.oversampling, std::min(n, d));
+  const bool warm = start && start->rows() > 0 && start->cols() == d;
+  std::mt19937_64 rng(q.seed);
+  std::normal_distribution<float> normal(0.0f, 1.0f);
+  Eigen::MatrixXf omega(d, rank);
+  const Eigen::Index warm_cols = warm ? std::min(start->rows(), rank) : 0;
+  if (warm_cols > 0) omega.leftCols(warm_cols) = start->topRows(warm_cols).transpose();
+  for (Eigen::Index j = warm_cols; j < rank; ++j)
+    for (Eigen::Index i = 0; i < d; ++i) omega(i, j) = normal(rng);
+  Eigen::MatrixXf Y(n, rank);
+  r.centered_energy = 0;
+  pass(true, [&](Eigen::Index b, const RowMatrixXf& xc) {
+    for (Eigen::Index i = 0; i < xc.rows(); ++i) r.centered_energy += xc.row(i).cast<double>().squaredNorm();
+    Y.middleRows(b, xc.rows()).noalias() = xc * omega;
+  });
+  if (want <= 0 || r.centered_energy <= 0) {
+    r.randomized = false;
+    return NoComponents(std::move(r), n, d);
+  }
+  MatrixXd Q = Orth(Y);
+  for (int it = 0; it < (warm ? q.warm_power_iterations : q.power_iterations); ++it) {
+    const Eigen::MatrixXf Qf = Q.cast<float>();
+    Eigen::MatrixXf Z = Eigen::MatrixXf::Zero(d, rank);
+    pass(true, [&](Eigen::Index b, const RowMatrixXf& xc) { Z.noalias() += xc.transpose() * Qf.middleRows(b, xc.rows()); });
+    const Eigen::MatrixXf Qz = Orth(Z).cast<float>();
+    pass(true, [&](Eigen::Index b, const RowMatrixXf& xc) { Y.middleRows(b, xc.rows()).noalias() = xc * Qz; });
+    Q = Orth(Y);
+  }
+  const Eigen::MatrixXf Qf = Q.cast<float>();
+  RowMatrixXf B = RowMatrixXf::Zero(rank, d);
+  pass(true, [&](Eigen::Index b, const RowMatrixXf& xc) { B.noalias() += Qf.middleRows(b, xc.rows()).transpose() * xc; });
+  MatrixXd G = MatrixXd::Zero(rank, rank);
+  for (Eigen::Index b = 0; b < d; b += kBlock) {
+    const Eigen::Index w = std::min(kBlock, d - b);
+    const MatrixXd block = B.middleCols(b, w).cast<double>();
+    G.selfadjointView<Eigen::Lower>().rankUpdate(block);
+  }
+  Eigen::SelfAdjointEigenSolver<MatrixXd> es(G.selfadjointView<Eigen::Lower>());
+  const MatrixXd U = es.eigenvectors().rowwise().reverse();
+  std::vector<double> eig;
+  for (Eigen::Index k = rank - 1; k >= 0; --k) eig.push_back(std::max(0.0, es.eigenvalues()[k]));
+  const int c = ChooseComponents(eig, q, r, limit);
+  BasisFromLeft(B, U, eig, c, r);
+  r.scores.resize(n, r.basis.rows());
+  pass(true, [&](Eigen::Index b, const RowMatrixXf& xc) { r.scores.middleRows(b, xc.rows()).noalias() = xc * r.basis.transpose(); });
+  FinishScores(r);
   return r;
 }
 
 }  // namespace
 
-PcaResult Pca(const Eigen::Ref<const RowMatrixXf>& X, const PcaRequest& q, const RowMatrixXf* start) {
-  RowMatrixXf Xc;
+PcaResult Pca(const PcaRows& X, const PcaRequest& q, const RowMatrixXf* start) {
+  const Eigen::Index n = X.rows, d = X.cols;
   PcaResult r;
-  Center(X, r, Xc);
-  return PcaOfCentred(Xc, std::move(r), q, start);
+  r.requested = q.max_components;
+  // n observations span at most n - 1 centered directions.
+  const int limit = static_cast<int>(std::min<Eigen::Index>(n - 1, d));
+  r.clamped_to = limit;
+  const Eigen::Index small = std::min(n, d);
+  const int want = std::min(q.max_components, limit);
+  if (!(small <= q.gram_limit || 2 * (want + q.oversampling) >= small)) return RandomizedPca(X, std::move(r), q, start, limit);
+  RowMatrixXf Xc(n, d);  // min(n, d) <= gram_limit (or barely above the sketch): all rows at once
+  X.get(0, n, Xc.data());
+  Moments(Xc, r);
+  r.centered_energy = CentreRows(Xc, r.mean, Xc);
+  return GramPca(Xc, std::move(r), q, limit);
 }
 
-PcaResult PcaInPlace(RowMatrixXf& X, const PcaRequest& q, const RowMatrixXf* start) {
-  PcaResult r;
-  Moments(X, r);
-  CentreRows(X, r, X);
-  return PcaOfCentred(X, std::move(r), q, start);
+PcaResult Pca(const Eigen::Ref<const RowMatrixXf>& X, const PcaRequest& q, const RowMatrixXf* start) {
+  const PcaRows rows{X.rows(), X.cols(), [&](Eigen::Index first, Eigen::Index count, float* out) {
+                       Eigen::Map<RowMatrixXf>(out, count, X.cols()) = X.middleRows(first, count);
+                     }};
+  return Pca(rows, q, start);
 }
 
 PcaResult PcaFullSvd(const Eigen::Ref<const RowMatrixXf>& X, int components) {
@@ -224,7 +279,6 @@ PcaResult PcaFullSvd(const Eigen::Ref<const RowMatrixXf>& X, int components) {
   const int c = static_cast<int>(std::min<Eigen::Index>(components, svd.nonzeroSingularValues()));
   r.clamped_to = c;
   r.basis = svd.matrixV().leftCols(c).transpose();
-  r.eigenvalues.assign(static_cast<std::size_t>(c), 0.0);
   Finish(Xc, r);
   return r;
 }

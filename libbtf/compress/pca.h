@@ -49,8 +49,23 @@ inline constexpr double kNullEigenvalueFraction = 1e-10;
 // matrix V0 is start's rows followed by Gaussian columns up to c + oversampling, with
 // warm_power_iterations subspace iterations instead of power_iterations.
 PcaResult Pca(const Eigen::Ref<const RowMatrixXf>& X, const PcaRequest& request, const RowMatrixXf* start = nullptr);
-// The same result, without a centred copy: X is centred in place (X - mean on return).
-PcaResult PcaInPlace(RowMatrixXf& X, const PcaRequest& request, const RowMatrixXf* start = nullptr);
+
+// The randomized path over PcaRows holds blocks of this many rows (the last one shorter), one at
+// a time, in row order, once per pass; it asks for them in runs of a few rows.
+inline constexpr Eigen::Index kPcaBlockRows = 128;
+
+// An n x d matrix (rows x cols) whose rows get(first, count, out) writes as float to out
+// (count x d, row-major): e.g. gathered from a larger matrix, converted from half.
+struct PcaRows {
+  Eigen::Index rows = 0, cols = 0;
+  std::function<void(Eigen::Index first, Eigen::Index count, float* out)> get;
+};
+
+// The same result as Pca on the matrix the rows make up, holding what each path needs: the
+// Gram paths (min(n, d) <= gram_limit, or barely above the sketch's c + oversampling) all rows
+// at once as float; the randomized path one block of kPcaBlockRows rows, its sketches
+// (n x (c + oversampling) and d x (c + oversampling)) and the scores, never the n x d matrix.
+PcaResult Pca(const PcaRows& X, const PcaRequest& request, const RowMatrixXf* start = nullptr);
 
 // The straightforward reference: full SVD (Eigen::BDCSVD) of the centered matrix, first c
 // components, no shape-dependent choice (benchmarks and tests compare against it).
