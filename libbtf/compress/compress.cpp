@@ -821,7 +821,8 @@ class LpcaCompressor {
         dist::Packer pe;
         pe.PutVector(sample_errors);
         pe.PutVector(split_errors);
-        dist::Unpacker u(dist::BroadcastBytes(0, rank_ == 0 ? std::move(pe.bytes) : std::vector<std::uint8_t>()));
+        const std::vector<std::uint8_t> errors = dist::BroadcastBytes(0, rank_ == 0 ? std::move(pe.bytes) : std::vector<std::uint8_t>());
+        dist::Unpacker u(errors);  // holds a reference to the bytes
         sample_errors = u.GetVector<double>();
         split_errors = u.GetVector<double>();
       }
