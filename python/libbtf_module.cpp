@@ -311,7 +311,7 @@ py::object Compress(const std::filesystem::path& input, const std::filesystem::p
                     int components, int clusters, double error, double energy, std::uint64_t bytes,
                     const std::string& storage, int quant_bits, double tensor_growth, std::uint64_t seed, bool log,
                     double log_epsilon, int max_iterations, double min_improvement, const std::string& lpca_memory,
-                    int lpca_sample, const std::string& lpca_matrix, const std::optional<std::filesystem::path>& scene, const std::optional<py::function>& progress) {
+                    int lpca_sample, int lpca_splits, const std::string& lpca_matrix, const std::optional<std::filesystem::path>& scene, const std::optional<py::function>& progress) {
   btf::CompressOptions o;
   o.method = btf::ParseMethod(method);
   o.components = components;
@@ -329,6 +329,7 @@ py::object Compress(const std::filesystem::path& input, const std::filesystem::p
   o.min_improvement = min_improvement;
   o.lpca_memory = lpca_memory;
   o.lpca_sample = lpca_sample;
+  o.lpca_splits = lpca_splits;
   o.lpca_matrix = lpca_matrix;
   if (scene) o.scene = btf::SceneSpec::Load(*scene);
   o.Check();
@@ -448,7 +449,7 @@ PYBIND11_MODULE(libbtf, m) {
         py::arg("quant_bits") = co.quant_bits, py::arg("tensor_growth") = co.tensor_growth, py::arg("seed") = co.seed, py::arg("log") = co.log_transform, py::arg("log_epsilon") = co.log_epsilon,
         py::arg("max_iterations") = co.max_iterations, py::arg("min_improvement") = co.min_improvement,
         py::arg("lpca_memory") = co.lpca_memory, py::arg("lpca_sample") = co.lpca_sample,
-        py::arg("lpca_matrix") = co.lpca_matrix,
+        py::arg("lpca_splits") = co.lpca_splits, py::arg("lpca_matrix") = co.lpca_matrix,
         py::arg("scene") = py::none(), py::arg("progress") = py::none(),
         "btf-compress INPUT -o OUTPUT with the same options; returns its --json summary as a dict");
 

@@ -99,6 +99,7 @@ void CompressOptions::Check() const {
   BTF_CHECK_OPTION(lpca_matrix == "half" || lpca_matrix == "float", "lpca_matrix", "must be half or float");
   BTF_CHECK_OPTION(gram_limit >= 1, "gram_limit", "must be >= 1");
   BTF_CHECK_OPTION(lpca_sample >= 1, "lpca_sample", "must be >= 1");
+  BTF_CHECK_OPTION(lpca_splits >= 0 && lpca_splits <= 1000, "lpca_splits", "must be 0..1000");
   BTF_CHECK_OPTION(storage == CodecStorage::kFloat || !IsFullMatrixFactorisation(method), "storage",
                    "half storage is for pca-view and lpca codecs (fmf/dfmf factors are stored as float)");
 }
@@ -109,7 +110,7 @@ nlohmann::json CompressOptions::ToJson() const {
           {"retained_energy", retained_energy}, {"seed", seed},
           {"log_transform", log_transform}, {"log_epsilon", log_epsilon},
           {"max_iterations", max_iterations}, {"min_improvement", min_improvement}, {"lpca_memory", lpca_memory},
-          {"lpca_sample", lpca_sample},     {"lpca_matrix", lpca_matrix},
+          {"lpca_sample", lpca_sample},     {"lpca_splits", lpca_splits},     {"lpca_matrix", lpca_matrix},
           {"gram_limit", gram_limit},       {"lpca_warm_start", lpca_warm_start},       {"storage", StorageName(storage)},
           {"max_bytes", max_bytes},         {"quant_bits", quant_bits},
           {"tensor_growth", tensor_growth}};
@@ -130,6 +131,7 @@ nlohmann::json CompressSummary::ToJson() const {
     j["iteration_relative_errors"] = iteration_errors;
     j["iteration_reassigned_texels"] = iteration_changes;
     j["sample_round_relative_errors"] = sample_errors;
+    j["split_merge_relative_errors"] = split_errors;
     j["lpca_memory"] = {{"mode", lpca_memory}, {"matrix", lpca_matrix}, {"input_passes", lpca_passes},
                         {"peak_rss_bytes", peak_rss_bytes}};
   }
@@ -186,6 +188,8 @@ std::string CompressSummary::Report() const {
     r += fmt::format("  iteration errors      {:.5f}\n", fmt::join(iteration_errors, " "));
   if (!sample_errors.empty())
     r += fmt::format("  sample round errors   {:.5f}\n", fmt::join(sample_errors, " "));
+  if (!split_errors.empty())
+    r += fmt::format("  split/merge errors    {:.5f}\n", fmt::join(split_errors, " "));
   if (!lpca_memory.empty())
     r += fmt::format("  lpca memory           {}, {} texel matrix, {} passes over the input, peak memory {}\n", lpca_memory,
                      lpca_matrix, lpca_passes, FormatBytes(peak_rss_bytes));

@@ -103,6 +103,11 @@ struct CompressOptions {
   // more. When the sample is smaller than the texels, local-PCA rounds run on the sample alone
   // (mini-batch, in memory) before the rounds over all texels.
   int lpca_sample = 8192;
+  // LPCA: split/merge trials on the sample after its rounds, at most (each: the cluster with the
+  // largest residual split in two, the cluster whose removal costs least merged into the others,
+  // rounds from there; kept if the sample's error falls, stopped at the first that does not fall
+  // by min_improvement). 0: none, as before 2026-12-03.
+  int lpca_splits = 4;
   // LPCA's per-cluster decomposition: Gram matrix of the smaller side (double) when min(n, d) <=
   // this, randomized SVD (c + 10 oversampling, 2 power iterations) otherwise. 256: the measured
   // crossover at c = 8 (bench_compress BM_ClusterPca, docs/btf-compress.md "Performance"); the
@@ -131,9 +136,10 @@ struct CompressSummary {
   int clusters = 0;                    // lpca
   std::vector<double> iteration_errors;  // lpca: relative error after each PCA/reassignment round
   std::vector<int> iteration_changes;    // lpca: texels that changed cluster in each round
-  // lpca: the sample's relative error after each mini-batch round on it (the first: Lloyd's
-  // clusters); empty when the sample is all texels.
-  std::vector<double> sample_errors;
+  // lpca: the sample's relative error after each local-PCA round on it (the first: Lloyd's
+  // clusters; the sample is all texels when there are no more than lpca_sample), and after each
+  // split/merge trial's rounds (kept only if lower).
+  std::vector<double> sample_errors, split_errors;
   std::string lpca_memory;               // lpca: "in-core" or "out-of-core" (the mode used)
   std::string lpca_matrix;               // lpca: "half" or "float" (the texel matrix's storage)
   int lpca_passes = 0;                   // lpca: passes over the input's view slots

@@ -402,17 +402,26 @@ struct ReassignModel {
         me(k, j) = big.row(k).cast<double>().dot(big.row(K + Eigen::Index(k) * c + j).cast<double>());
   }
 
-  // Row i of P (= a texel's row times big^T; norm: its squared norm): the cluster that
-  // reconstructs it best (the lowest index on ties; `arg` if none is fitted), its squared residual.
+  // Row i of P (= a texel's row times big^T; norm: its squared norm): its score on cluster k's
+  // component j, and its squared residual under cluster k (infinity where k is still empty).
+  double Score(const Eigen::MatrixXf& P, Eigen::Index i, int k, int j) const {
+    return double(P(i, K + Eigen::Index(k) * c + j)) - me(k, j);
+  }
+  double Residual(const Eigen::MatrixXf& P, Eigen::Index i, double norm, int k) const {
+    if (ck[static_cast<std::size_t>(k)] < 0) return std::numeric_limits<double>::infinity();
+    double r = norm - 2.0 * P(i, k) + mnorm[k];
+    for (int j = 0; j < ck[static_cast<std::size_t>(k)]; ++j) {
+      const double proj = Score(P, i, k, j);
+      r -= proj * proj;
+    }
+    return r;
+  }
+  // The cluster that reconstructs row i best (the lowest index on ties; `arg` if none is
+  // fitted), its squared residual.
   int Best(const Eigen::MatrixXf& P, Eigen::Index i, double norm, int arg, double* residual) const {
     double best = std::numeric_limits<double>::infinity();
     for (int k = 0; k < K; ++k) {
-      if (ck[static_cast<std::size_t>(k)] < 0) continue;
-      double r = norm - 2.0 * P(i, k) + mnorm[k];
-      for (int j = 0; j < ck[static_cast<std::size_t>(k)]; ++j) {
-        const double proj = double(P(i, K + Eigen::Index(k) * c + j)) - me(k, j);
-        r -= proj * proj;
-      }
+      const double r = Residual(P, i, norm, k);
       if (r < best) best = r, arg = k;
     }
     *residual = std::max(best, 0.0);
@@ -699,26 +708,19 @@ class LpcaCompressor {
     }
   }
 
-  // For rows rows[0..m) of M (rows 0..m-1 when rows is null): the nearest center (squared
-  // Euclidean distance, the lower index on ties) and that distance (norms: of M's rows).
+  // For rows rows[0..m) of M: the nearest center (squared Euclidean distance, the lower index
+  // on ties) and that distance (norms: of M's rows).
   template <typename Mat>
   static void NearestCenters(const Mat& M, const double* norms, const RowMatrixXf& centers,
                              const std::size_t* rows, std::size_t m, std::int32_t* assign, double* dist) {
     const Eigen::VectorXd cn = centers.cast<double>().rowwise().squaredNorm();
     ForBlocks(m, [&](std::size_t first, std::size_t count) {
       const Eigen::Index w = static_cast<Eigen::Index>(count);
-      Eigen::MatrixXf P;
-      bool direct = false;  // consecutive float rows: the GEMM reads M itself
-      if constexpr (std::is_same_v<Mat, RowMatrixXf>)
-        if (!rows) P.noalias() = M.middleRows(static_cast<Eigen::Index>(first), w) * centers.transpose(), direct = true;
-      if (!direct) {
-        RowMatrixXf X(w, M.cols());
-        for (Eigen::Index i = 0; i < w; ++i)
-          RowToFloat(M, static_cast<Eigen::Index>(rows ? rows[first + std::size_t(i)] : first + std::size_t(i)), X.row(i).data());
-        P.noalias() = X * centers.transpose();
-      }
+      RowMatrixXf X(w, M.cols());
+      for (Eigen::Index i = 0; i < w; ++i) RowToFloat(M, static_cast<Eigen::Index>(rows[first + std::size_t(i)]), X.row(i).data());
+      const Eigen::MatrixXf P = X * centers.transpose();
       for (Eigen::Index i = 0; i < w; ++i) {
-        const std::size_t t = rows ? rows[first + std::size_t(i)] : first + std::size_t(i);
+        const std::size_t t = rows[first + std::size_t(i)];
         double best = std::numeric_limits<double>::infinity();
         int arg = 0;
         for (Eigen::Index k = 0; k < centers.rows(); ++k) {
@@ -726,7 +728,7 @@ class LpcaCompressor {
           if (e < best) best = e, arg = static_cast<int>(k);
         }
         assign[first + std::size_t(i)] = arg;
-        if (dist) dist[first + std::size_t(i)] = std::max(0.0, best + norms[t]);
+        dist[first + std::size_t(i)] = std::max(0.0, best + norms[t]);
       }
     });
   }
@@ -781,10 +783,10 @@ class LpcaCompressor {
 
   // k-means on a sample: k-means++ seeds, then Lloyd rounds (means in double, summed in sample
   // order) until no sample texel moves, the k-means objective improves by less than
-  // kLloydTolerance (relative) or kLloydRounds. If the sample is smaller than the texels, local-PCA
-  // rounds on the sample alone follow (SampleRounds) and every texel goes to the cluster whose
-  // sample model reconstructs it best; otherwise every texel goes to its nearest center. Then the
-  // first per-cluster PCA of all texels is fitted.
+  // kLloydTolerance (relative) or kLloydRounds. Then local-PCA rounds and split/merge steps on the
+  // sample alone (SampleRounds; the sample is every texel when there are no more than
+  // lpca_sample), every texel to the cluster whose sample model reconstructs it best, and the
+  // first per-cluster PCA of all texels.
   ClusterFit InitialClustering() {
     K_ = o_.clusters;
     if (std::size_t(K_) > N_) {
@@ -794,20 +796,18 @@ class LpcaCompressor {
     std::mt19937_64 rng(o_.seed);
     const std::vector<std::size_t> sample = Sample(rng);
     const std::size_t S = sample.size();
-    const bool mini_batch = S < N_;
-    RowMatrixXf centers(K_, static_cast<Eigen::Index>(d_));
     int rounds = 0;
-    std::vector<PcaResult> models;  // mini-batch: the sample rounds' per-cluster models (no scores)
-    std::vector<double> sample_errors;
+    std::vector<PcaResult> models;  // the sample rounds' per-cluster models (no scores)
+    std::vector<double> sample_errors, split_errors;
     // Phases: kmeans (the sample, seeds and Lloyd; on ranks other than 0 also the wait for rank 0's
     // sample rounds), sample_rounds, first_fit (the first assignment of all texels and their PCA).
     Timer t;
     double kmeans_s = 0;
     auto on_sample = [&](const auto& M, const double* norms, const std::vector<std::size_t>& rows) {
       std::vector<std::int32_t> assign;
-      rounds = Lloyd(M, norms, rows, rng, centers, assign);
+      rounds = Lloyd(M, norms, rows, rng, assign);
       kmeans_s = t.Seconds();
-      if (mini_batch) models = SampleRounds(M, norms, rows, std::move(assign), sample_errors);
+      models = SampleRounds(M, norms, rows, std::move(assign), sample_errors, split_errors);
     };
     if (R_ == 1 && !ooc_) {
       A_.Visit([&](const auto& M) { on_sample(M, norms_.data(), sample); });
@@ -820,9 +820,8 @@ class LpcaCompressor {
         for (std::size_t i = 0; i < S; ++i) norms[i] = norms_[static_cast<Eigen::Index>(sample[i])];
         on_sample(rows, norms.data(), index);
       }
-      dist::Broadcast(0, centers.data(), std::size_t(centers.size()) * sizeof(float));
       dist::Broadcast(0, &rounds, sizeof rounds);
-      if (mini_batch && R_ > 1) {  // every rank reassigns its texels with the sample models
+      if (R_ > 1) {  // every rank reassigns its texels with the sample models
         models.resize(static_cast<std::size_t>(K_));
         for (int k = 0; k < K_; ++k) {
           auto bytes = dist::BroadcastBytes(0, rank_ == 0 ? PackPca(models[std::size_t(k)]) : std::vector<std::uint8_t>());
@@ -830,65 +829,137 @@ class LpcaCompressor {
         }
         dist::Packer pe;
         pe.PutVector(sample_errors);
-        sample_errors = dist::Unpacker(dist::BroadcastBytes(0, rank_ == 0 ? std::move(pe.bytes) : std::vector<std::uint8_t>()))
-                            .GetVector<double>();
+        pe.PutVector(split_errors);
+        const std::vector<std::uint8_t> errors = dist::BroadcastBytes(0, rank_ == 0 ? std::move(pe.bytes) : std::vector<std::uint8_t>());
+        dist::Unpacker u(errors);  // holds a reference to the bytes
+        sample_errors = u.GetVector<double>();
+        split_errors = u.GetVector<double>();
       }
     }
     if (kmeans_s == 0) kmeans_s = t.Seconds();
     sum_.times.Add("kmeans", kmeans_s);
-    if (mini_batch) sum_.times.Add("sample_rounds", t.Seconds() - kmeans_s);
+    sum_.times.Add("sample_rounds", t.Seconds() - kmeans_s);
     t.Restart();
     ClusterFit fit;
-    if (mini_batch) {
-      fit.assign.assign(N_, 0);
-      Reassign(models, fit.assign);
-    } else {
-      std::vector<std::int32_t> mine(ooc_ ? N_ : local());
-      ForChunks([&] { A_.Visit([&](const auto& M) {
-        NearestCenters(M, nullptr, centers, nullptr, local(), mine.data() + (ooc_ ? t0_ : 0), nullptr);
-      }); });
-      fit.assign = R_ > 1 ? dist::AllGatherConcat(mine) : std::move(mine);
-    }
-    BTF_CHECK(fit.assign.size() == N_);
-    FitClusters(fit, mini_batch, nullptr, mini_batch ? &models : nullptr);
+    fit.assign.assign(N_, 0);
+    Reassign(models, fit.assign);
+    FitClusters(fit, true, nullptr, &models);
     sum_.times.Add("first_fit", t.Seconds());
     sum_.sample_errors = sample_errors;
+    sum_.split_errors = split_errors;
     sum_.iteration_errors.push_back(fit.error);
     sum_.iteration_changes.push_back(0);
-    rep_.Info("lpca: k-means on {} texels ({} Lloyd rounds){}, relative error {:.5f}", S, rounds,
-              mini_batch ? fmt::format(", {} local-PCA rounds on them (error {:.5f} there)", sample_errors.size() - 1,
-                                       sample_errors.empty() ? 0.0 : sample_errors.back())
-                         : std::string(),
-              fit.error);
+    rep_.Info("lpca: k-means on {} texels ({} Lloyd rounds), {} local-PCA rounds and {} split/merge trials on them, "
+              "relative error {:.5f}",
+              S, rounds, sample_errors.size() - 1, split_errors.size(), fit.error);
     return fit;
   }
 
-  // Mini-batch local-PCA rounds on the sample (rows `rows` of M, norms of M's rows), from Lloyd's
+  // Local-PCA rounds on the sample (rows `rows` of M, norms of M's rows), from Lloyd's
   // assignment `assign` of the sample texels: per-cluster PCA of the sample members, then every
   // sample texel to the cluster that reconstructs it best, until nothing moves, a round improves
-  // the sample's relative error by less than min_improvement or max_iterations rounds. errors:
-  // the sample's relative error after each fit (the first from Lloyd's clusters). Returns the
-  // best fit's models (mean and basis; the scores are dropped).
+  // the sample's relative error by less than min_improvement or max_iterations rounds. Then at
+  // most lpca_splits split/merge trials (ProposeSplitMerge, then rounds from there), each kept
+  // if it lowers the sample's error, until one does not lower it by min_improvement (relative).
+  // errors: the sample's relative error after each fit of the first rounds (the first from
+  // Lloyd's clusters); split_errors: after each trial's rounds. Returns the best fit's models
+  // (mean and basis; the scores are dropped).
   template <typename Mat>
   std::vector<PcaResult> SampleRounds(const Mat& M, const double* norms, const std::vector<std::size_t>& rows,
-                                      std::vector<std::int32_t> assign, std::vector<double>& errors) const {
+                                      std::vector<std::int32_t> assign, std::vector<double>& errors,
+                                      std::vector<double>& split_errors) const {
     double energy = 0;
     for (std::size_t t : rows) energy += norms[t];
     std::vector<double> residual;
     ClusterFit fit{{}, std::move(assign), 0, {}};
     FitSample(M, rows, energy, residual, fit, nullptr);
     errors.push_back(fit.error);
+    RoundsOnSample(M, norms, rows, energy, residual, fit, &errors);
+    for (int s = 0; s < o_.lpca_splits; ++s) {
+      ClusterFit trial{{}, {}, 0, {}};
+      if (!ProposeSplitMerge(M, norms, rows, fit, trial.assign)) break;
+      FitSample(M, rows, energy, residual, trial, &fit);
+      RoundsOnSample(M, norms, rows, energy, residual, trial, nullptr);
+      split_errors.push_back(trial.error);
+      const bool better = trial.error < fit.error;
+      const bool enough = fit.error - trial.error >= o_.min_improvement * fit.error;
+      if (better) fit = std::move(trial);
+      if (!enough) break;
+    }
+    return std::move(fit.pca);
+  }
+
+  // SampleRounds' rounds from the fitted fit (kept: the best); errors (if given): the sample's
+  // error after each fit.
+  template <typename Mat>
+  void RoundsOnSample(const Mat& M, const double* norms, const std::vector<std::size_t>& rows, double energy,
+                      std::vector<double>& residual, ClusterFit& fit, std::vector<double>* errors) const {
     for (int it = 0; it < o_.max_iterations; ++it) {
       ClusterFit next{{}, fit.assign, 0, {}};
       if (ReassignSample(M, norms, rows, fit.pca, next.assign, residual) == 0) break;
       FitSample(M, rows, energy, residual, next, &fit);
-      errors.push_back(next.error);
+      if (errors) errors->push_back(next.error);
       const bool better = next.error < fit.error;
       const bool enough = fit.error - next.error >= o_.min_improvement * fit.error;
       if (better) fit = std::move(next);
       if (!enough) break;
     }
-    return std::move(fit.pca);
+  }
+
+  // A split/merge proposal from the sample fit f (its models and members): the cluster j with
+  // the largest residual energy is split at its mean along its first component (the members
+  // scoring above 0 leave it), and the cluster k != j whose removal costs least (summed over its
+  // members: the squared residual under the best other cluster minus that under k) is emptied
+  // into those other clusters and takes j's leaving members. assign: the proposal's sample
+  // assignment. False (no proposal) when j has no component or one side of the split is empty.
+  template <typename Mat>
+  bool ProposeSplitMerge(const Mat& M, const double* norms, const std::vector<std::size_t>& rows, const ClusterFit& f,
+                         std::vector<std::int32_t>& assign) const {
+    if (K_ < 2) return false;
+    int j = 0;
+    for (int k = 1; k < K_; ++k)
+      if (f.pca[std::size_t(k)].residual_energy > f.pca[std::size_t(j)].residual_energy) j = k;
+    if (f.pca[std::size_t(j)].components() == 0) return false;
+    // Per sample texel: the best cluster other than its own (alt) and, for j's split, its score
+    // on j's first component; per cluster, the cost of its removal.
+    const ReassignModel model(f.pca, o_.components, d_);
+    const std::size_t S = rows.size();
+    std::vector<std::int32_t> alt(S);
+    std::vector<double> gap(S), score(S);
+    ForBlocks(S, [&](std::size_t first, std::size_t count) {
+      const Eigen::Index w = static_cast<Eigen::Index>(count);
+      RowMatrixXf X(w, M.cols());
+      for (Eigen::Index i = 0; i < w; ++i) RowToFloat(M, static_cast<Eigen::Index>(rows[first + std::size_t(i)]), X.row(i).data());
+      const Eigen::MatrixXf P = X * model.big.transpose();
+      for (Eigen::Index i = 0; i < w; ++i) {
+        const std::size_t s = first + std::size_t(i);
+        const double norm = norms[rows[s]];
+        const int own = f.assign[s];
+        double best = std::numeric_limits<double>::infinity();
+        alt[s] = own;
+        for (int k = 0; k < K_; ++k) {
+          if (k == own) continue;
+          const double r = model.Residual(P, i, norm, k);
+          if (r < best) best = r, alt[s] = k;
+        }
+        gap[s] = best - model.Residual(P, i, norm, own);
+        score[s] = model.Score(P, i, j, 0);
+      }
+    });
+    std::vector<double> cost(static_cast<std::size_t>(K_), 0.0);
+    for (std::size_t s = 0; s < S; ++s) cost[std::size_t(f.assign[s])] += gap[s];
+    int k = j == 0 ? 1 : 0;
+    for (int l = 0; l < K_; ++l)
+      if (l != j && cost[std::size_t(l)] < cost[std::size_t(k)]) k = l;
+    assign = f.assign;
+    std::size_t leaving = 0, staying = 0;
+    for (std::size_t s = 0; s < S; ++s) {
+      if (assign[s] == k) assign[s] = alt[s];
+      if (assign[s] != j) continue;
+      if (score[s] > 0) assign[s] = k, ++leaving;
+      else ++staying;
+    }
+    return leaving > 0 && staying > 0;
   }
 
   // FitClusters on the sample (f.assign: per sample texel, members: sample positions); residual:
@@ -960,8 +1031,8 @@ class LpcaCompressor {
   // assign: the sample texels' nearest centers.
   template <typename Mat>
   int Lloyd(const Mat& M, const double* norms, const std::vector<std::size_t>& sample, std::mt19937_64& rng,
-            RowMatrixXf& centers, std::vector<std::int32_t>& assign) const {
-    centers = SeedCenters(M, sample, rng);
+            std::vector<std::int32_t>& assign) const {
+    RowMatrixXf centers = SeedCenters(M, sample, rng);
     const std::size_t S = sample.size();
     std::vector<std::int32_t> next(S);
     assign.assign(S, -1);

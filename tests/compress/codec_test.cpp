@@ -591,6 +591,9 @@ TEST(Options, CheckRejectsBadValues) {
   o.target_error = 0.1;
   o.retained_energy = 0.9;
   EXPECT_THROW(o.Check(), Error);
+  o = CompressOptions{};
+  o.lpca_splits = -1;
+  EXPECT_THROW(o.Check(), Error);
   EXPECT_THROW(ParseMethod("jpeg"), Error);
 }
 

@@ -123,6 +123,8 @@ int main(int argc, char** argv) {
   app.add_option("--min-improvement", co.min_improvement, "LPCA: stop when a round improves the error by less");
   app.add_option("--lpca-sample", co.lpca_sample,
                  "LPCA: texels of the k-means sample; smaller than the texels: local-PCA rounds on it first");
+  app.add_option("--lpca-splits", co.lpca_splits,
+                 "LPCA: split/merge trials on the sample after its rounds, at most (0: none)");
   app.add_option("--storage", cf.storage, "Coefficient storage: float (float32) or half (float16, half the size)");
   app.add_option("--scene", cf.scene, "scene.json: keep only the directions, mip level and channels a scene uses");
   app.add_option("-o,--output", cf.output, "Output codec file (.h5)");
