@@ -708,6 +708,16 @@ class LpcaCompressor {
     }
   }
 
+  // P = X right^T for X = the rows rows[first, first + count) of M, gathered as float (one
+  // ForBlocks block: the GEMM of a block does not depend on the thread that runs it).
+  template <typename Mat>
+  static Eigen::MatrixXf GatheredProducts(const Mat& M, const std::size_t* rows, std::size_t first, std::size_t count,
+                                          const RowMatrixXf& right) {
+    RowMatrixXf X(static_cast<Eigen::Index>(count), M.cols());
+    for (Eigen::Index i = 0; i < X.rows(); ++i) RowToFloat(M, static_cast<Eigen::Index>(rows[first + std::size_t(i)]), X.row(i).data());
+    return X * right.transpose();
+  }
+
   // For rows rows[0..m) of M: the nearest center (squared Euclidean distance, the lower index
   // on ties) and that distance (norms: of M's rows).
   template <typename Mat>
@@ -716,9 +726,7 @@ class LpcaCompressor {
     const Eigen::VectorXd cn = centers.cast<double>().rowwise().squaredNorm();
     ForBlocks(m, [&](std::size_t first, std::size_t count) {
       const Eigen::Index w = static_cast<Eigen::Index>(count);
-      RowMatrixXf X(w, M.cols());
-      for (Eigen::Index i = 0; i < w; ++i) RowToFloat(M, static_cast<Eigen::Index>(rows[first + std::size_t(i)]), X.row(i).data());
-      const Eigen::MatrixXf P = X * centers.transpose();
+      const Eigen::MatrixXf P = GatheredProducts(M, rows, first, count, centers);
       for (Eigen::Index i = 0; i < w; ++i) {
         const std::size_t t = rows[first + std::size_t(i)];
         double best = std::numeric_limits<double>::infinity();
@@ -928,9 +936,7 @@ class LpcaCompressor {
     std::vector<double> gap(S), score(S);
     ForBlocks(S, [&](std::size_t first, std::size_t count) {
       const Eigen::Index w = static_cast<Eigen::Index>(count);
-      RowMatrixXf X(w, M.cols());
-      for (Eigen::Index i = 0; i < w; ++i) RowToFloat(M, static_cast<Eigen::Index>(rows[first + std::size_t(i)]), X.row(i).data());
-      const Eigen::MatrixXf P = X * model.big.transpose();
+      const Eigen::MatrixXf P = GatheredProducts(M, rows.data(), first, count, model.big);
       for (Eigen::Index i = 0; i < w; ++i) {
         const std::size_t s = first + std::size_t(i);
         const double norm = norms[rows[s]];
@@ -1014,9 +1020,7 @@ class LpcaCompressor {
     std::vector<std::uint8_t> changed(S, 0);
     ForBlocks(S, [&](std::size_t first, std::size_t count) {
       const Eigen::Index w = static_cast<Eigen::Index>(count);
-      RowMatrixXf X(w, M.cols());
-      for (Eigen::Index i = 0; i < w; ++i) RowToFloat(M, static_cast<Eigen::Index>(rows[first + std::size_t(i)]), X.row(i).data());
-      const Eigen::MatrixXf P = X * model.big.transpose();
+      const Eigen::MatrixXf P = GatheredProducts(M, rows.data(), first, count, model.big);
       for (Eigen::Index i = 0; i < w; ++i) {
         const std::size_t s = first + std::size_t(i);
         const int arg = model.Best(P, i, norms[rows[s]], assign[s], &residual[s]);
