@@ -257,8 +257,7 @@ PcaResult Pca(const PcaRows& X, const PcaRequest& q, const RowMatrixXf* start) {
   if (!(small <= q.gram_limit || 2 * (want + q.oversampling) >= small)) return RandomizedPca(X, std::move(r), q, start, limit);
   RowMatrixXf Xc(n, d);  // min(n, d) <= gram_limit (or barely above the sketch): all rows at once
   X.get(0, n, Xc.data());
-  Moments(Xc, r);
-  r.centered_energy = CentreRows(Xc, r.mean, Xc);
+  Center(Xc, r, Xc);  // in place
   return GramPca(Xc, std::move(r), q, limit);
 }
 
