@@ -52,6 +52,17 @@ void Center(const Eigen::Ref<const RowMatrixXf>& X, PcaResult& r, RowMatrixXf& X
   r.centered_energy = CentreRows(X, r.mean, Xc);
 }
 
+// A A^T of A's rows in double, lower triangle, summed over column blocks of kBlock.
+MatrixXd GramOfRows(const RowMatrixXf& A) {
+  MatrixXd G = MatrixXd::Zero(A.rows(), A.rows());
+  for (Eigen::Index b = 0; b < A.cols(); b += kBlock) {
+    const Eigen::Index w = std::min(kBlock, A.cols() - b);
+    const MatrixXd block = A.middleCols(b, w).cast<double>();
+    G.selfadjointView<Eigen::Lower>().rankUpdate(block);
+  }
+  return G;
+}
+
 // Number of components to keep from eigenvalues sorted in decreasing order.
 int ChooseComponents(const std::vector<double>& eig, const PcaRequest& q, double total_energy, double centered_energy,
                      int limit, int* dropped_null) {
@@ -142,12 +153,7 @@ PcaResult GramPca(const RowMatrixXf& Xc, PcaResult r, const PcaRequest& q, int l
   if (std::min(q.max_components, limit) <= 0 || r.centered_energy <= 0) return NoComponents(std::move(r), n, d);
   std::vector<double> eig;
   if (n <= d) {
-    MatrixXd G = MatrixXd::Zero(n, n);
-    for (Eigen::Index b = 0; b < d; b += kBlock) {
-      const Eigen::Index w = std::min(kBlock, d - b);
-      const MatrixXd block = Xc.middleCols(b, w).cast<double>();
-      G.selfadjointView<Eigen::Lower>().rankUpdate(block);
-    }
+    const MatrixXd G = GramOfRows(Xc);
     Eigen::SelfAdjointEigenSolver<MatrixXd> es(G.selfadjointView<Eigen::Lower>());
     const MatrixXd U = es.eigenvectors().rowwise().reverse();
     for (Eigen::Index k = n - 1; k >= 0; --k) eig.push_back(std::max(0.0, es.eigenvalues()[k]));
@@ -225,12 +231,7 @@ PcaResult RandomizedPca(const PcaRows& X, PcaResult r, const PcaRequest& q, cons
   const Eigen::MatrixXf Qf = Q.cast<float>();
   RowMatrixXf B = RowMatrixXf::Zero(rank, d);
   pass(true, [&](Eigen::Index b, const RowMatrixXf& xc) { B.noalias() += Qf.middleRows(b, xc.rows()).transpose() * xc; });
-  MatrixXd G = MatrixXd::Zero(rank, rank);
-  for (Eigen::Index b = 0; b < d; b += kBlock) {
-    const Eigen::Index w = std::min(kBlock, d - b);
-    const MatrixXd block = B.middleCols(b, w).cast<double>();
-    G.selfadjointView<Eigen::Lower>().rankUpdate(block);
-  }
+  const MatrixXd G = GramOfRows(B);
   Eigen::SelfAdjointEigenSolver<MatrixXd> es(G.selfadjointView<Eigen::Lower>());
   const MatrixXd U = es.eigenvectors().rowwise().reverse();
   std::vector<double> eig;

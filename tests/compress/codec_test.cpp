@@ -41,6 +41,20 @@ CompressOptions LpcaFloat(int k, int c) {
 
 // --- PCA kernel -----------------------------------------------------------------------------
 
+// A cluster-shaped matrix: `rows` members x 2000 values, a decaying spectrum (8 strong
+// directions, s_k = 2^-k, over 1 % noise) around a mean of 1, drawn with `seed`.
+RowMatrixXf ClusterShaped(Eigen::Index rows, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<float> normal(0, 1);
+  RowMatrixXf U(rows, 8), V(8, 2000), N(rows, 2000);
+  for (Eigen::Index i = 0; i < U.size(); ++i) U.data()[i] = normal(rng);
+  for (Eigen::Index i = 0; i < V.size(); ++i) V.data()[i] = normal(rng) * std::ldexp(1.0f, -int(i / 2000));
+  for (Eigen::Index i = 0; i < N.size(); ++i) N.data()[i] = 0.01f * normal(rng);
+  RowMatrixXf X = U * V + N;
+  X.array() += 1.0f;
+  return X;
+}
+
 // ||X - mean - scores basis||^2 in double.
 double ReconstructionError(const RowMatrixXf& X, const PcaResult& r) {
   const Eigen::MatrixXd rec = (r.scores * r.basis).cast<double>().rowwise() + r.mean.transpose().cast<double>();
@@ -83,17 +97,9 @@ TEST(Pca, GramCovarianceRandomizedAndFullSvdAgreeOnLowRankData) {
 }
 
 TEST(Pca, LpcaGramLimitTakesTheRandomizedPathForLargeClustersAndItLosesLittle) {
-  // A cluster-shaped matrix: 300 members x 2000 values, a decaying spectrum (8 strong directions,
-  // s_k = 2^-k, over 1 % noise) around a mean; c = 8. LPCA's default gram_limit (256) takes
-  // the randomized path for it, the limit of before (1024) the Gram.
-  std::mt19937_64 rng(3);
-  std::normal_distribution<float> normal(0, 1);
-  RowMatrixXf U(300, 8), V(8, 2000), N(300, 2000);
-  for (int i = 0; i < U.size(); ++i) U.data()[i] = normal(rng);
-  for (int i = 0; i < V.size(); ++i) V.data()[i] = normal(rng) * std::ldexp(1.0f, -(i / 2000));
-  for (int i = 0; i < N.size(); ++i) N.data()[i] = 0.01f * normal(rng);
-  RowMatrixXf X = U * V + N;
-  X.array() += 1.0f;
+  // A cluster-shaped matrix (ClusterShaped: 300 members x 2000 values); c = 8. LPCA's default
+  // gram_limit (256) takes the randomized path for it, the limit of before (1024) the Gram.
+  const RowMatrixXf X = ClusterShaped(300, 3);
   PcaRequest q;
   q.max_components = 8;
   q.gram_limit = CompressOptions{}.gram_limit;
@@ -119,14 +125,7 @@ TEST(Pca, WarmStartFromAPreviousFitLosesLittle) {
   // its previous basis. The cluster-shaped matrix of the test above (300 x 2000, 8 strong
   // directions over 1 % noise); the previous members: 30 of the 300 rows swapped for other draws
   // of the same model.
-  std::mt19937_64 rng(3);
-  std::normal_distribution<float> normal(0, 1);
-  RowMatrixXf U(330, 8), V(8, 2000), N(330, 2000);
-  for (int i = 0; i < U.size(); ++i) U.data()[i] = normal(rng);
-  for (int i = 0; i < V.size(); ++i) V.data()[i] = normal(rng) * std::ldexp(1.0f, -(i / 2000));
-  for (int i = 0; i < N.size(); ++i) N.data()[i] = 0.01f * normal(rng);
-  RowMatrixXf all = U * V + N;
-  all.array() += 1.0f;
+  const RowMatrixXf all = ClusterShaped(330, 3);
   const RowMatrixXf X = all.topRows(300);
   RowMatrixXf prev = X;
   prev.topRows(30) = all.bottomRows(30);
@@ -164,14 +163,7 @@ TEST(Pca, RowsInBlocksGiveTheSameBytesAndTheRandomizedPathHoldsOneBlock) {
   // cluster-shaped matrix (8 strong directions over 1 % noise, around a mean), 300 members taken
   // from every other row of a 600-row matrix; c = 8, LPCA's default gram_limit (randomized for
   // 300 rows, the Gram for 200).
-  std::mt19937_64 rng(5);
-  std::normal_distribution<float> normal(0, 1);
-  RowMatrixXf U(600, 8), V(8, 2000), N(600, 2000);
-  for (int i = 0; i < U.size(); ++i) U.data()[i] = normal(rng);
-  for (int i = 0; i < V.size(); ++i) V.data()[i] = normal(rng) * std::ldexp(1.0f, -(i / 2000));
-  for (int i = 0; i < N.size(); ++i) N.data()[i] = 0.01f * normal(rng);
-  RowMatrixXf big = U * V + N;
-  big.array() += 1.0f;
+  const RowMatrixXf big = ClusterShaped(600, 5);
   PcaRequest q;
   q.max_components = 8;
   for (const Eigen::Index n : {300, 200}) {
