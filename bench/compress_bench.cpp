@@ -25,8 +25,10 @@
 #include <unistd.h>
 
 #include "libbtf/compress/codec.h"
+#include "libbtf/compress/lpca_reassign.h"
 #include "libbtf/compress/pca.h"
 #include "libbtf/io/dataset_io.h"
+#include "libbtf/io/half.h"
 #include "bench/synthetic_btf.h"
 
 namespace {
@@ -204,6 +206,7 @@ void BM_Lpca(benchmark::State& st) {
   o.max_iterations = static_cast<int>(st.range(0));
   o.gram_limit = static_cast<int>(st.range(1));
   o.lpca_warm_start = st.range(2) != 0;
+  o.lpca_prune = st.range(3) != 0;
   btf::CompressSummary s;
   const auto source = btf::MemorySource(d);
   for (auto _ : st) {
@@ -212,9 +215,14 @@ void BM_Lpca(benchmark::State& st) {
   }
   SetSizeCounters(st);
   const btf::CompressOptions defaults;
-  const bool is_default = o.gram_limit == defaults.gram_limit && o.lpca_warm_start == defaults.lpca_warm_start;
+  const bool is_default = o.gram_limit == defaults.gram_limit && o.lpca_warm_start == defaults.lpca_warm_start &&
+                          o.lpca_prune == defaults.lpca_prune;
   st.SetLabel("gram_limit " + std::to_string(o.gram_limit) + (o.lpca_warm_start ? ", warm start" : ", cold start") +
-              (is_default ? " (default)" : " (before)"));
+              (o.lpca_prune ? ", pruned" : ", every cluster") + (is_default ? " (default)" : " (before)"));
+  // Clusters whose residual a texel's reassignment computed, mean over the reassignments.
+  double compared = 0;
+  for (double c : s.lpca_compared) compared += c / double(s.lpca_compared.size());
+  st.counters["clusters_compared"] = compared;
   for (const auto& [name, sec] : s.times.phases()) st.counters[name + "_s"] = sec;
   st.counters["rounds"] = double(s.iteration_errors.size());
   st.counters["relative_error"] = s.relative_error;
@@ -225,10 +233,17 @@ void BM_Lpca(benchmark::State& st) {
   // kernel benchmark below.
   if (is_default) g_lpca_seconds = s.times.Total();
 }
-// Args: max_iterations, gram_limit, warm start (CompressOptions::lpca_warm_start). Before (every
-// randomized cluster fit from a Gaussian sketch) first, then the default, whose codec the decode
-// benchmarks use.
-BENCHMARK(BM_Lpca)->Args({20, 256, 0})->Args({20, 256, 1})->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
+// Args: max_iterations, gram_limit, warm start (CompressOptions::lpca_warm_start), pruned
+// reassignment (CompressOptions::lpca_prune). Before (every randomized cluster fit from a Gaussian
+// sketch; every cluster compared in each reassignment) first, then the default, whose codec the
+// decode benchmarks use.
+BENCHMARK(BM_Lpca)
+    ->Args({20, 256, 0, 1})
+    ->Args({20, 256, 1, 0})
+    ->Args({20, 256, 1, 1})
+    ->Unit(benchmark::kSecond)
+    ->Iterations(1)
+    ->UseRealTime();
 
 // One cluster's PCA (n texels' ABRDFs, 81 x 81 x 3 values; c = 8 as BM_Lpca) on one thread, by
 // one path: Arg 1: n, Arg 2: 0 Gram (double), 1 randomized (18 test vectors, 2 power iterations),
@@ -293,25 +308,32 @@ void BM_LpcaTensor(benchmark::State& st) {
 }
 BENCHMARK(BM_LpcaTensor)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 
-// The LPCA reassignment kernel alone (one texel block against all clusters, on all threads; the
-// compressor runs one block per thread), as a GEMM rate.
+// The LPCA reassignment kernel alone (SubspaceResidual: 256 half texel rows against 32 clusters of
+// c = 8, every pair, the rows split over all threads as the compressor splits its blocks), as a
+// flop rate (2 d (c + 1) per pair: the squared differences and the c projections) and as a
+// fraction of the float GEMM rate of the same run.
 void BM_LpcaReassignKernel(benchmark::State& st) {
   const auto& d = Data();
-  // One static block of the reassignment (256 texels, compress.cpp kRows) against all clusters.
-  const Eigen::Index n = std::min<Eigen::Index>(256, static_cast<Eigen::Index>(d.num_texels()));
-  const Eigen::Index dim = static_cast<Eigen::Index>(d.abrdf_size()), cols = 32 * 9;
-  RowMatrixXf A = RowMatrixXf::Random(n, dim), B = RowMatrixXf::Random(cols, dim);
-  Eigen::MatrixXf P(n, cols);
+  const int n = 256, K = 32, c = 8;
+  const std::size_t dim = d.abrdf_size();
+  const RowMatrixXf A = RowMatrixXf::Random(n, Eigen::Index(dim)), B = RowMatrixXf::Random(K * (c + 1), Eigen::Index(dim));
+  std::vector<std::uint16_t> rows(std::size_t(n) * dim);
+  btf::FloatsToHalves(A.data(), rows.data(), rows.size());
+  std::vector<double> r(std::size_t(n) * K);
   double secs = 0;
   int reps = 0;
   for (auto _ : st) {
     const auto t0 = std::chrono::steady_clock::now();
-    P.noalias() = A * B.transpose();
-    benchmark::DoNotOptimize(P.data());
+#pragma omp parallel for schedule(static)
+    for (int i = 0; i < n; ++i)
+      for (int k = 0; k < K; ++k)
+        r[std::size_t(i) * K + std::size_t(k)] = btf::SubspaceResidual(
+            rows.data() + std::size_t(i) * dim, B.row(k * (c + 1)).data(), B.row(k * (c + 1) + 1).data(), c, dim);
+    benchmark::DoNotOptimize(r.data());
     secs += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     ++reps;
   }
-  const double g = 2.0 * n * dim * cols * reps / secs / 1e9;
+  const double g = 2.0 * double(n) * double(dim) * K * (c + 1) * reps / secs / 1e9;
   st.counters["GFLOPs"] = g;
   if (GemmRate(false) > 0) st.counters["fraction_of_float_gemm"] = g / GemmRate(false);
 }

@@ -111,7 +111,8 @@ nlohmann::json CompressOptions::ToJson() const {
           {"log_transform", log_transform}, {"log_epsilon", log_epsilon},
           {"max_iterations", max_iterations}, {"min_improvement", min_improvement}, {"lpca_memory", lpca_memory},
           {"lpca_sample", lpca_sample},     {"lpca_splits", lpca_splits},     {"lpca_matrix", lpca_matrix},
-          {"gram_limit", gram_limit},       {"lpca_warm_start", lpca_warm_start},       {"storage", StorageName(storage)},
+          {"gram_limit", gram_limit},       {"lpca_warm_start", lpca_warm_start},
+          {"lpca_prune", lpca_prune},       {"storage", StorageName(storage)},
           {"max_bytes", max_bytes},         {"quant_bits", quant_bits},
           {"tensor_growth", tensor_growth}};
 }
@@ -130,6 +131,7 @@ nlohmann::json CompressSummary::ToJson() const {
     j["clusters"] = clusters;
     j["iteration_relative_errors"] = iteration_errors;
     j["iteration_reassigned_texels"] = iteration_changes;
+    j["reassignment_clusters_compared"] = lpca_compared;
     j["sample_round_relative_errors"] = sample_errors;
     j["split_merge_relative_errors"] = split_errors;
     j["lpca_memory"] = {{"mode", lpca_memory}, {"matrix", lpca_matrix}, {"input_passes", lpca_passes},
@@ -186,6 +188,8 @@ std::string CompressSummary::Report() const {
   r += fmt::format("  PSNR                  {:.2f} dB (peak = {} = {:.6g})\n", psnr_db, psnr_peak_definition, psnr_peak);
   if (method == "lpca" || method == "lpca-tensor")
     r += fmt::format("  iteration errors      {:.5f}\n", fmt::join(iteration_errors, " "));
+  if (!lpca_compared.empty())
+    r += fmt::format("  clusters compared     {:.2f} (per texel, each reassignment)\n", fmt::join(lpca_compared, " "));
   if (!sample_errors.empty())
     r += fmt::format("  sample round errors   {:.5f}\n", fmt::join(sample_errors, " "));
   if (!split_errors.empty())

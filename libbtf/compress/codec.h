@@ -119,6 +119,11 @@ struct CompressOptions {
   // rows instead of 7) instead of a Gaussian sketch; false: every fit starts cold as before
   // 2026-12-03.
   bool lpca_warm_start = true;
+  // LPCA: each reassignment of all texels computes a texel's residual only under the clusters that
+  // bounds on a sketch (the span of the clusters' means and first basis rows, built at the first
+  // reassignment) leave as possibly best; the same assignment as under every cluster
+  // (lpca_reassign.h). false: every cluster, as the check of that.
+  bool lpca_prune = true;
   CodecStorage storage = CodecStorage::kFloat;  // coefficient storage (--storage float|half)
   std::optional<SceneSpec> scene;  // keep only what a scene needs (scene.h)
   void Check() const;
@@ -136,6 +141,9 @@ struct CompressSummary {
   int clusters = 0;                    // lpca
   std::vector<double> iteration_errors;  // lpca: relative error after each PCA/reassignment round
   std::vector<int> iteration_changes;    // lpca: texels that changed cluster in each round
+  // lpca: clusters whose residual was computed per texel (mean over all texels) in each
+  // reassignment of all texels (the first from the sample's models): K without lpca_prune.
+  std::vector<double> lpca_compared;
   // lpca: the sample's relative error after each local-PCA round on it (the first: Lloyd's
   // clusters; the sample is all texels when there are no more than lpca_sample), and after each
   // split/merge trial's rounds (kept only if lower).
