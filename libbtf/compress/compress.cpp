@@ -1364,24 +1364,34 @@ class LpcaCompressor {
         }
         sketch_.Candidates(sketch_g_.data() + t * m, sketch_e_.data() + t, norms_.data() + t, count, candidates);
       }
+      // Per cluster, the block's texels that compare it (in texel order), their residuals in one
+      // batch; clusters in increasing order, so that ties go to the lowest index.
+      using Row = std::conditional_t<std::is_same_v<std::decay_t<decltype(M)>, TexelMatrix::HalfMatrix>, std::uint16_t, float>;
+      std::vector<std::vector<std::size_t>> texels(static_cast<std::size_t>(K_));
+      for (std::size_t i = 0; i < count; ++i) {
+        const std::vector<int>& list = sketch_.empty() ? fitted : candidates[i];
+        for (int k : list) texels[std::size_t(k)].push_back(i);
+        compared[t + i] = std::uint32_t(list.size());
+      }
+      std::vector<double> best(count, std::numeric_limits<double>::infinity()), r;
+      std::vector<const Row*> rows;
+      std::vector<int> arg(assign.begin() + std::ptrdiff_t(t), assign.begin() + std::ptrdiff_t(t + count));
+      for (int k = 0; k < K_; ++k) {
+        const std::vector<std::size_t>& list = texels[std::size_t(k)];
+        if (list.empty()) continue;
+        rows.clear();
+        for (std::size_t i : list) rows.push_back(reinterpret_cast<const Row*>(M.row(Eigen::Index(b + i)).data()));
+        r.resize(list.size());
+        const PcaResult& p = pca[std::size_t(k)];
+        SubspaceResiduals(rows.data(), rows.size(), p.mean.data(), p.basis.data(), p.components(), d_, r.data());
+        for (std::size_t j = 0; j < list.size(); ++j)
+          if (r[j] < best[list[j]]) best[list[j]] = r[j], arg[list[j]] = k;
+      }
       for (std::size_t i = 0; i < count; ++i) {
         const std::size_t ti = t + i;
-        const auto* row = M.row(Eigen::Index(b + i)).data();
-        double best = std::numeric_limits<double>::infinity();
-        int arg = assign[ti];
-        for (int k : sketch_.empty() ? fitted : candidates[i]) {
-          const PcaResult& p = pca[std::size_t(k)];
-          double r;
-          if constexpr (std::is_same_v<std::decay_t<decltype(M)>, TexelMatrix::HalfMatrix>)
-            r = SubspaceResidual(reinterpret_cast<const std::uint16_t*>(row), p.mean.data(), p.basis.data(), p.components(), d_);
-          else
-            r = SubspaceResidual(row, p.mean.data(), p.basis.data(), p.components(), d_);
-          if (r < best) best = r, arg = k;
-        }
-        compared[ti] = std::uint32_t(sketch_.empty() ? fitted.size() : candidates[i].size());
-        residual_[ti] = std::max(best, 0.0);
-        changed[ti] = arg != assign[ti];
-        assign[ti] = arg;
+        residual_[ti] = std::max(best[i], 0.0);
+        changed[ti] = arg[i] != assign[ti];
+        assign[ti] = arg[i];
       }
     }); }); });
     // Mean clusters compared per texel (this rank's texels; the sum of integers is exact).

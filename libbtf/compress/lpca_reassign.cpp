@@ -27,6 +27,7 @@ struct Lanes {
   static Lanes Load(const std::uint16_t* p) {
     return {_mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(p)))};
   }
+  void Store(float* p) const { _mm256_storeu_ps(p, v); }
   friend Lanes operator-(Lanes a, Lanes b) { return {_mm256_sub_ps(a.v, b.v)}; }
   static Lanes Fma(Lanes a, Lanes b, Lanes c) { return {_mm256_fmadd_ps(a.v, b.v, c.v)}; }
   double Sum() const {
@@ -51,6 +52,7 @@ struct Lanes {
     for (int l = 0; l < 8; ++l) r.v[l] = HalfToFloat(p[l]);
     return r;
   }
+  void Store(float* p) const { std::copy_n(v, 8, p); }
   friend Lanes operator-(Lanes a, Lanes b) {
     for (int l = 0; l < 8; ++l) a.v[l] -= b.v[l];
     return a;
@@ -67,69 +69,107 @@ struct Lanes {
 };
 #endif
 
-// One sweep over the d values: sq (if given) = sum (x - mean)^2, dot[j] = sum (x - mean) . b_j
-// for the W rows b (W <= 8 accumulators besides sq stay in registers). The last d mod 8 values
-// are taken as one zero-padded step.
-template <int W, typename T>
-void Sweep(const T* x, const float* mean, const float* b, std::size_t stride, std::size_t d, double* sq, double* dot) {
+// Values per chunk: a sweep's 8 basis rows and the mean over a chunk (18 KB) stay in L1 while
+// every row of a batch passes over them.
+constexpr std::size_t kChunk = 512;
+constexpr std::size_t kState = 9 * 8;  // floats of a sweep's lanes: W <= 8 dot products, then the squares
+
+// Steps [i0, i1) of one sweep for one row x: state holds the sweep's lanes between calls (dot
+// product j at 8 j, the squares, if Sq, at 8 W). Each lane takes the indices = l mod 8 in index
+// order, so chunking changes no sum.
+template <int W, bool Sq, typename T>
+void Steps(const T* x, const float* mean, const float* b, std::size_t stride, std::size_t i0, std::size_t i1, float* state) {
   Lanes acc[W + 1];
-  for (auto& a : acc) a = Lanes::Zero();
-  const std::size_t full = d / 8 * 8;
-  auto step = [&](Lanes diff, auto&& row) {
-    if (sq) acc[W] = Lanes::Fma(diff, diff, acc[W]);
-    for (int j = 0; j < W; ++j) acc[j] = Lanes::Fma(diff, row(j), acc[j]);
-  };
-  for (std::size_t i = 0; i < full; i += 8)
-    step(Lanes::Load(x + i) - Lanes::Load(mean + i), [&](int j) { return Lanes::Load(b + std::size_t(j) * stride + i); });
-  if (full < d) {
-    const std::size_t r = d - full;
-    T xt[8] = {};
-    float mt[8] = {}, bt[8][8] = {};
-    std::copy_n(x + full, r, xt);
-    std::copy_n(mean + full, r, mt);
-    for (int j = 0; j < W; ++j) std::copy_n(b + std::size_t(j) * stride + full, r, bt[j]);
-    step(Lanes::Load(xt) - Lanes::Load(mt), [&](int j) { return Lanes::Load(bt[j]); });
+  for (int j = 0; j <= W; ++j) acc[j] = Lanes::Load(state + 8 * j);
+  for (std::size_t i = i0; i < i1; i += 8) {
+    const Lanes diff = Lanes::Load(x + i) - Lanes::Load(mean + i);
+    if constexpr (Sq) acc[W] = Lanes::Fma(diff, diff, acc[W]);
+    for (int j = 0; j < W; ++j) acc[j] = Lanes::Fma(diff, Lanes::Load(b + std::size_t(j) * stride + i), acc[j]);
   }
-  if (sq) *sq = acc[W].Sum();
-  for (int j = 0; j < W; ++j) dot[j] = acc[j].Sum();
+  for (int j = 0; j <= W; ++j) acc[j].Store(state + 8 * j);
 }
 
-template <typename T>
-void SweepN(int w, const T* x, const float* mean, const float* b, std::size_t d, double* sq, double* dot) {
+template <bool Sq, typename T>
+void StepsN(int w, const T* x, const float* mean, const float* b, std::size_t stride, std::size_t i0, std::size_t i1,
+            float* state) {
   switch (w) {
-    case 0: return Sweep<0>(x, mean, b, d, d, sq, dot);
-    case 1: return Sweep<1>(x, mean, b, d, d, sq, dot);
-    case 2: return Sweep<2>(x, mean, b, d, d, sq, dot);
-    case 3: return Sweep<3>(x, mean, b, d, d, sq, dot);
-    case 4: return Sweep<4>(x, mean, b, d, d, sq, dot);
-    case 5: return Sweep<5>(x, mean, b, d, d, sq, dot);
-    case 6: return Sweep<6>(x, mean, b, d, d, sq, dot);
-    case 7: return Sweep<7>(x, mean, b, d, d, sq, dot);
-    default: return Sweep<8>(x, mean, b, d, d, sq, dot);
+    case 0: return Steps<0, Sq>(x, mean, b, stride, i0, i1, state);
+    case 1: return Steps<1, Sq>(x, mean, b, stride, i0, i1, state);
+    case 2: return Steps<2, Sq>(x, mean, b, stride, i0, i1, state);
+    case 3: return Steps<3, Sq>(x, mean, b, stride, i0, i1, state);
+    case 4: return Steps<4, Sq>(x, mean, b, stride, i0, i1, state);
+    case 5: return Steps<5, Sq>(x, mean, b, stride, i0, i1, state);
+    case 6: return Steps<6, Sq>(x, mean, b, stride, i0, i1, state);
+    case 7: return Steps<7, Sq>(x, mean, b, stride, i0, i1, state);
+    default: return Steps<8, Sq>(x, mean, b, stride, i0, i1, state);
   }
 }
 
+// The basis rows in sweeps of at most 8 (the first also sums the squares), over chunks of the
+// values, each chunk for every row of the batch; the last d mod 8 values as one zero-padded step.
 template <typename T>
-double Residual(const T* x, const float* mean, const float* basis, int c, std::size_t d) {
+void Residuals(const T* const* rows, std::size_t n, const float* mean, const float* basis, int c, std::size_t d,
+               double* out) {
   BTF_CHECK(c >= 0);
-  double sq = 0, dot[8];
-  double r = 0;
-  // Rows in sweeps of 8; the first sweep also sums the squares.
-  for (int j0 = 0; j0 == 0 || j0 < c; j0 += 8) {
-    const int w = std::min(8, c - j0);
-    SweepN(w, x, mean, basis + std::size_t(j0) * d, d, j0 == 0 ? &sq : nullptr, dot);
-    for (int j = 0; j < w; ++j) r += dot[j] * dot[j];
+  const int sweeps = std::max(1, (c + 7) / 8);
+  auto width = [&](int s) { return std::min(8, c - 8 * s); };
+  std::vector<float> state(n * std::size_t(sweeps) * kState, 0.0f);
+  auto at = [&](std::size_t r, int s) { return state.data() + (r * std::size_t(sweeps) + std::size_t(s)) * kState; };
+  const std::size_t full = d / 8 * 8;
+  for (std::size_t i0 = 0; i0 < full; i0 += kChunk) {
+    const std::size_t i1 = std::min(full, i0 + kChunk);
+    for (int s = 0; s < sweeps; ++s)
+      for (std::size_t r = 0; r < n; ++r) {
+        const float* b = basis + std::size_t(8 * s) * d;
+        if (s == 0) StepsN<true>(width(s), rows[r], mean, b, d, i0, i1, at(r, s));
+        else StepsN<false>(width(s), rows[r], mean, b, d, i0, i1, at(r, s));
+      }
   }
-  return sq - r;
+  if (full < d) {
+    const std::size_t rest = d - full;
+    float mt[8] = {}, bt[64] = {};
+    std::copy_n(mean + full, rest, mt);
+    for (int s = 0; s < sweeps; ++s) {
+      std::fill(std::begin(bt), std::end(bt), 0.0f);
+      for (int j = 0; j < width(s); ++j) std::copy_n(basis + std::size_t(8 * s + j) * d + full, rest, bt + 8 * j);
+      for (std::size_t r = 0; r < n; ++r) {
+        T xt[8] = {};
+        std::copy_n(rows[r] + full, rest, xt);
+        if (s == 0) StepsN<true>(width(s), xt, mt, bt, 8, 0, 8, at(r, s));
+        else StepsN<false>(width(s), xt, mt, bt, 8, 0, 8, at(r, s));
+      }
+    }
+  }
+  for (std::size_t r = 0; r < n; ++r) {
+    double projected = 0;
+    for (int s = 0; s < sweeps; ++s)
+      for (int j = 0; j < width(s); ++j) {
+        const double dot = Lanes::Load(at(r, s) + 8 * j).Sum();
+        projected += dot * dot;
+      }
+    out[r] = Lanes::Load(at(r, 0) + 8 * width(0)).Sum() - projected;
+  }
 }
 
 }  // namespace
 
+void SubspaceResiduals(const float* const* rows, std::size_t n, const float* mean, const float* basis, int c,
+                       std::size_t d, double* out) {
+  Residuals(rows, n, mean, basis, c, d, out);
+}
+void SubspaceResiduals(const std::uint16_t* const* rows, std::size_t n, const float* mean, const float* basis, int c,
+                       std::size_t d, double* out) {
+  Residuals(rows, n, mean, basis, c, d, out);
+}
 double SubspaceResidual(const float* x, const float* mean, const float* basis, int c, std::size_t d) {
-  return Residual(x, mean, basis, c, d);
+  double r;
+  Residuals(&x, 1, mean, basis, c, d, &r);
+  return r;
 }
 double SubspaceResidual(const std::uint16_t* x, const float* mean, const float* basis, int c, std::size_t d) {
-  return Residual(x, mean, basis, c, d);
+  double r;
+  Residuals(&x, 1, mean, basis, c, d, &r);
+  return r;
 }
 
 ReassignSketch::ReassignSketch(const std::vector<PcaResult>& clusters, std::size_t d, int per_cluster) {

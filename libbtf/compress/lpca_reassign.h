@@ -32,6 +32,13 @@ namespace btf {
 // computes around it. x as float, or as IEEE half bits (converted exactly).
 double SubspaceResidual(const float* x, const float* mean, const float* basis, int c, std::size_t d);
 double SubspaceResidual(const std::uint16_t* x, const float* mean, const float* basis, int c, std::size_t d);
+// out[r] = SubspaceResidual(rows[r], ...) for n rows, the same values: the rows pass over the
+// cluster's values in chunks together, so that the mean and basis are read from cache, not from
+// memory, once per row.
+void SubspaceResiduals(const float* const* rows, std::size_t n, const float* mean, const float* basis, int c,
+                       std::size_t d, double* out);
+void SubspaceResiduals(const std::uint16_t* const* rows, std::size_t n, const float* mean, const float* basis, int c,
+                       std::size_t d, double* out);
 
 class ReassignSketch {
  public:
