@@ -868,6 +868,73 @@ class LpcaCompressor {
     return fit;
   }
 
+  // The clusters with a model (a mean), in increasing order.
+  static std::vector<int> Fitted(const std::vector<PcaResult>& pca) {
+    std::vector<int> fitted;
+    for (std::size_t k = 0; k < pca.size(); ++k)
+      if (pca[k].mean.size() > 0) fitted.push_back(int(k));
+    return fitted;
+  }
+
+  // Each of `count` rows of M (row i: M's row at_row(i)) to the cluster that reconstructs it best
+  // (SubspaceResiduals), among `fitted` or, with candidates, among candidates[i]; the lowest index
+  // on ties; a row keeps its cluster if it compares none. Per row: assign and residual updated,
+  // changed (0/1) and compared (clusters) set. Per cluster, the rows that compare it are one batch.
+  template <typename Mat, typename AtRow>
+  static void BestClusters(const Mat& M, AtRow at_row, std::size_t count, const std::vector<PcaResult>& pca,
+                           const std::vector<int>& fitted, const std::vector<std::vector<int>>* candidates,
+                           std::int32_t* assign, double* residual, std::uint8_t* changed, std::uint32_t* compared) {
+    using Row = std::conditional_t<std::is_same_v<Mat, TexelMatrix::HalfMatrix>, std::uint16_t, float>;
+    std::vector<std::vector<std::size_t>> batch(pca.size());
+    for (std::size_t i = 0; i < count; ++i) {
+      const std::vector<int>& list = candidates ? (*candidates)[i] : fitted;
+      for (int k : list) batch[std::size_t(k)].push_back(i);
+      if (compared) compared[i] = std::uint32_t(list.size());
+    }
+    std::vector<double> best(count, std::numeric_limits<double>::infinity()), r;
+    std::vector<std::int32_t> arg(assign, assign + count);
+    std::vector<const Row*> rows;
+    for (std::size_t k = 0; k < pca.size(); ++k) {
+      const std::vector<std::size_t>& list = batch[k];
+      if (list.empty()) continue;
+      rows.clear();
+      for (std::size_t i : list) rows.push_back(reinterpret_cast<const Row*>(M.row(at_row(i)).data()));
+      r.resize(list.size());
+      const PcaResult& p = pca[k];
+      SubspaceResiduals(rows.data(), rows.size(), p.mean.data(), p.basis.data(), p.components(), std::size_t(M.cols()),
+                        r.data());
+      for (std::size_t j = 0; j < list.size(); ++j)
+        if (r[j] < best[list[j]]) best[list[j]] = r[j], arg[list[j]] = std::int32_t(k);
+    }
+    for (std::size_t i = 0; i < count; ++i) {
+      residual[i] = std::max(best[i], 0.0);
+      changed[i] = arg[i] != assign[i];
+      assign[i] = arg[i];
+    }
+  }
+
+  // The sample rounds' reassignment sketch (o_.lpca_prune): built from the first fit of Lloyd's
+  // clusters, with the sample texels' coordinates (sample order) and residuals.
+  struct SampleSketch {
+    ReassignSketch sketch;
+    std::vector<float> g;
+    std::vector<double> e;
+  };
+  template <typename Mat>
+  SampleSketch MakeSampleSketch(const Mat& M, const std::vector<std::size_t>& rows, const std::vector<PcaResult>& pca) const {
+    SampleSketch s{ReassignSketch(pca, d_, kSketchBasisRows), {}, {}};
+    const std::size_t m = std::size_t(s.sketch.dims());
+    s.g.assign(rows.size() * m, 0.0f);
+    s.e.assign(rows.size(), 0.0);
+    if (m == 0) return s;
+    ForBlocks(rows.size(), [&](std::size_t first, std::size_t count) {
+      RowMatrixXf X(static_cast<Eigen::Index>(count), M.cols());
+      for (Eigen::Index i = 0; i < X.rows(); ++i) RowToFloat(M, static_cast<Eigen::Index>(rows[first + std::size_t(i)]), X.row(i).data());
+      s.sketch.Project(X, s.g.data() + first * m, s.e.data() + first);
+    });
+    return s;
+  }
+
   // Local-PCA rounds on the sample (rows `rows` of M, norms of M's rows), from Lloyd's
   // assignment `assign` of the sample texels: per-cluster PCA of the sample members, then every
   // sample texel to the cluster that reconstructs it best, until nothing moves, a round improves
@@ -887,12 +954,14 @@ class LpcaCompressor {
     ClusterFit fit{{}, std::move(assign), 0, {}};
     FitSample(M, rows, energy, residual, fit, nullptr);
     errors.push_back(fit.error);
-    RoundsOnSample(M, norms, rows, energy, residual, fit, &errors);
+    SampleSketch sketch;
+    if (o_.lpca_prune) sketch = MakeSampleSketch(M, rows, fit.pca);
+    RoundsOnSample(M, norms, rows, energy, residual, fit, &errors, sketch);
     for (int s = 0; s < o_.lpca_splits; ++s) {
       ClusterFit trial{{}, {}, 0, {}};
       if (!ProposeSplitMerge(M, norms, rows, fit, trial.assign)) break;
       FitSample(M, rows, energy, residual, trial, &fit);
-      RoundsOnSample(M, norms, rows, energy, residual, trial, nullptr);
+      RoundsOnSample(M, norms, rows, energy, residual, trial, nullptr, sketch);
       split_errors.push_back(trial.error);
       const bool better = trial.error < fit.error;
       const bool enough = fit.error - trial.error >= o_.min_improvement * fit.error;
@@ -906,10 +975,11 @@ class LpcaCompressor {
   // error after each fit.
   template <typename Mat>
   void RoundsOnSample(const Mat& M, const double* norms, const std::vector<std::size_t>& rows, double energy,
-                      std::vector<double>& residual, ClusterFit& fit, std::vector<double>* errors) const {
+                      std::vector<double>& residual, ClusterFit& fit, std::vector<double>* errors,
+                      SampleSketch& sketch) const {
     for (int it = 0; it < o_.max_iterations; ++it) {
       ClusterFit next{{}, fit.assign, 0, {}};
-      if (ReassignSample(M, norms, rows, fit.pca, next.assign, residual) == 0) break;
+      if (ReassignSample(M, norms, rows, fit.pca, next.assign, residual, sketch) == 0) break;
       FitSample(M, rows, energy, residual, next, &fit);
       if (errors) errors->push_back(next.error);
       const bool better = next.error < fit.error;
@@ -1014,24 +1084,27 @@ class LpcaCompressor {
   }
 
   // Reassign on the sample: each sample texel (rows `rows` of M) to the cluster whose model
-  // reconstructs it best, in static blocks of kRows gathered rows; returns the number moved.
+  // reconstructs it best (BestClusters, with the sketch's candidates unless it is empty), in
+  // static blocks of kRows sample texels; returns the number moved.
   template <typename Mat>
   std::size_t ReassignSample(const Mat& M, const double* norms, const std::vector<std::size_t>& rows,
                              const std::vector<PcaResult>& pca, std::vector<std::int32_t>& assign,
-                             std::vector<double>& residual) const {
-    const ReassignModel model(pca, o_.components, d_);
-    const std::size_t S = rows.size();
+                             std::vector<double>& residual, SampleSketch& sketch) const {
+    const std::size_t S = rows.size(), m = std::size_t(sketch.sketch.dims());
+    const std::vector<int> fitted = Fitted(pca);
+    if (!sketch.sketch.empty()) sketch.sketch.SetClusters(pca);
     residual.resize(S);
     std::vector<std::uint8_t> changed(S, 0);
     ForBlocks(S, [&](std::size_t first, std::size_t count) {
-      const Eigen::Index w = static_cast<Eigen::Index>(count);
-      const Eigen::MatrixXf P = GatheredProducts(M, rows.data(), first, count, model.big);
-      for (Eigen::Index i = 0; i < w; ++i) {
-        const std::size_t s = first + std::size_t(i);
-        const int arg = model.Best(P, i, norms[rows[s]], assign[s], &residual[s]);
-        changed[s] = arg != assign[s];
-        assign[s] = arg;
+      std::vector<std::vector<int>> candidates;
+      if (!sketch.sketch.empty()) {
+        std::vector<double> norm2(count);
+        for (std::size_t i = 0; i < count; ++i) norm2[i] = norms[rows[first + i]];
+        sketch.sketch.Candidates(sketch.g.data() + first * m, sketch.e.data() + first, norm2.data(), count, candidates);
       }
+      BestClusters(M, [&](std::size_t i) { return Eigen::Index(rows[first + i]); }, count, pca, fitted,
+                   sketch.sketch.empty() ? nullptr : &candidates, assign.data() + first, residual.data() + first,
+                   changed.data() + first, nullptr);
     });
     return std::accumulate(changed.begin(), changed.end(), std::size_t(0));
   }
@@ -1347,9 +1420,7 @@ class LpcaCompressor {
       sketch_e_.assign(N_, 0.0);
     }
     if (!sketch_.empty()) sketch_.SetClusters(pca);
-    std::vector<int> fitted;
-    for (int k = 0; k < K_; ++k)
-      if (pca[std::size_t(k)].mean.size() > 0) fitted.push_back(k);
+    const std::vector<int> fitted = Fitted(pca);
     const std::size_t m = std::size_t(sketch_.dims());
     std::vector<std::uint8_t> changed(N_, 0);
     std::vector<std::uint32_t> compared(N_, 0);
@@ -1364,35 +1435,9 @@ class LpcaCompressor {
         }
         sketch_.Candidates(sketch_g_.data() + t * m, sketch_e_.data() + t, norms_.data() + t, count, candidates);
       }
-      // Per cluster, the block's texels that compare it (in texel order), their residuals in one
-      // batch; clusters in increasing order, so that ties go to the lowest index.
-      using Row = std::conditional_t<std::is_same_v<std::decay_t<decltype(M)>, TexelMatrix::HalfMatrix>, std::uint16_t, float>;
-      std::vector<std::vector<std::size_t>> texels(static_cast<std::size_t>(K_));
-      for (std::size_t i = 0; i < count; ++i) {
-        const std::vector<int>& list = sketch_.empty() ? fitted : candidates[i];
-        for (int k : list) texels[std::size_t(k)].push_back(i);
-        compared[t + i] = std::uint32_t(list.size());
-      }
-      std::vector<double> best(count, std::numeric_limits<double>::infinity()), r;
-      std::vector<const Row*> rows;
-      std::vector<int> arg(assign.begin() + std::ptrdiff_t(t), assign.begin() + std::ptrdiff_t(t + count));
-      for (int k = 0; k < K_; ++k) {
-        const std::vector<std::size_t>& list = texels[std::size_t(k)];
-        if (list.empty()) continue;
-        rows.clear();
-        for (std::size_t i : list) rows.push_back(reinterpret_cast<const Row*>(M.row(Eigen::Index(b + i)).data()));
-        r.resize(list.size());
-        const PcaResult& p = pca[std::size_t(k)];
-        SubspaceResiduals(rows.data(), rows.size(), p.mean.data(), p.basis.data(), p.components(), d_, r.data());
-        for (std::size_t j = 0; j < list.size(); ++j)
-          if (r[j] < best[list[j]]) best[list[j]] = r[j], arg[list[j]] = k;
-      }
-      for (std::size_t i = 0; i < count; ++i) {
-        const std::size_t ti = t + i;
-        residual_[ti] = std::max(best[i], 0.0);
-        changed[ti] = arg[i] != assign[ti];
-        assign[ti] = arg[i];
-      }
+      BestClusters(M, [&](std::size_t i) { return Eigen::Index(b + i); }, count, pca, fitted,
+                   sketch_.empty() ? nullptr : &candidates, assign.data() + t, residual_.data() + t, changed.data() + t,
+                   compared.data() + t);
     }); }); });
     // Mean clusters compared per texel (this rank's texels; the sum of integers is exact).
     std::uint64_t pairs = std::accumulate(compared.begin(), compared.end(), std::uint64_t(0));
