@@ -374,16 +374,17 @@ std::vector<std::vector<std::size_t>> MembersFillingEmpty(std::vector<std::int32
   return members;
 }
 
-// The reassignment's model: one GEMM row per cluster mean, then c rows per cluster basis (zero
-// where a cluster has fewer components); the mean norms and mean-basis products in double.
-struct ReassignModel {
+// The split/merge proposals' model of every cluster: one GEMM row per cluster mean, then c rows
+// per cluster basis (zero where a cluster has fewer components); the mean norms and mean-basis
+// products in double. (The reassignments compare clusters with BestClusters.)
+struct AllClustersModel {
   int K = 0, c = 0;
   RowMatrixXf big;
   Eigen::VectorXd mnorm;
   Eigen::MatrixXd me;
   std::vector<int> ck;  // components per cluster, -1 for a cluster still empty
 
-  ReassignModel(const std::vector<PcaResult>& pca, int components, std::size_t d)
+  AllClustersModel(const std::vector<PcaResult>& pca, int components, std::size_t d)
       : K(static_cast<int>(pca.size())), c(components) {
     big = RowMatrixXf::Zero(Eigen::Index(K) * (c + 1), static_cast<Eigen::Index>(d));
     mnorm = Eigen::VectorXd::Zero(K);
@@ -416,17 +417,6 @@ struct ReassignModel {
       r -= proj * proj;
     }
     return r;
-  }
-  // The cluster that reconstructs row i best (the lowest index on ties; `arg` if none is
-  // fitted), its squared residual.
-  int Best(const Eigen::MatrixXf& P, Eigen::Index i, double norm, int arg, double* residual) const {
-    double best = std::numeric_limits<double>::infinity();
-    for (int k = 0; k < K; ++k) {
-      const double r = Residual(P, i, norm, k);
-      if (r < best) best = r, arg = k;
-    }
-    *residual = std::max(best, 0.0);
-    return arg;
   }
 };
 
@@ -1005,7 +995,7 @@ class LpcaCompressor {
     if (f.pca[std::size_t(j)].components() == 0) return false;
     // Per sample texel: the best cluster other than its own (alt) and, for j's split, its score
     // on j's first component; per cluster, the cost of its removal.
-    const ReassignModel model(f.pca, o_.components, d_);
+    const AllClustersModel model(f.pca, o_.components, d_);
     const std::size_t S = rows.size();
     std::vector<std::int32_t> alt(S);
     std::vector<double> gap(S), score(S);
