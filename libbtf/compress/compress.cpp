@@ -588,15 +588,20 @@ class LpcaCompressor {
     // in the tiles: the slot is range-checked on its own then, so that every read of a slot
     // refuses what it holds beyond the half range, as one that covers it does.
     const bool covers = texels.size() == N_;
-    std::vector<float> slot(in_.slot_size());
+    std::vector<float> buffer;  // the slot, where the source does not hold it or the log changes it
     if (norms) std::fill(norms, norms + texels.size(), 0.0);
     for (int v = 0; v < V; ++v) {
       rep_.Progress(std::size_t(v), std::size_t(V), "read");
-      in_.ReadViewSlot(v, slot.data());
+      const float* slot = tr_.log ? nullptr : in_.ViewSlotData(v);
+      if (!slot) {
+        buffer.resize(in_.slot_size());
+        in_.ReadViewSlot(v, buffer.data());
+        slot = buffer.data();
+      }
       // With a half matrix and no log, the range check below also finds NaN and Inf (and
       // RefuseBeyondHalf names them as CheckFiniteSlot does), so the slot is not scanned twice.
-      if (tr_.log || !half()) CheckFiniteSlot(in_, v, slot.data());
-      tr_.Apply(in_, v, slot.data(), slot.size());
+      if (tr_.log || !half()) CheckFiniteSlot(in_, v, slot);
+      tr_.Apply(in_, v, buffer.data(), buffer.size());  // (with the log, slot is the buffer)
       bool beyond = false;
       // channels: a compile-time 3 (RGB: the copies inlined) or C.
       const auto transpose = [&](auto channels) {
@@ -610,7 +615,7 @@ class LpcaCompressor {
           T* stage = stages.data() + th * kTile * part;
           bool any = false;
           for (int l = 0; l < L; ++l) {
-            const float* from = slot.data() + std::size_t(l) * N_ * cc;
+            const float* from = slot + std::size_t(l) * N_ * cc;
             const float* x = from + texels[i0] * cc;  // the tile's values, as float
             if (!consecutive[std::size_t(b)]) {
               for (std::size_t i = i0; i < i1; ++i)
@@ -643,8 +648,8 @@ class LpcaCompressor {
       };
       if (C == 3) transpose(std::integral_constant<std::size_t, 3>());
       else transpose(std::size_t(C));
-      if (half() && (beyond || (!covers && std::any_of(slot.begin(), slot.end(), BeyondHalf))))
-        RefuseBeyondHalf(v, slot.data());
+      if (half() && (beyond || (!covers && std::any_of(slot, slot + in_.slot_size(), BeyondHalf))))
+        RefuseBeyondHalf(v, slot);
     }
     ++sum_.lpca_passes;
   }
