@@ -551,87 +551,112 @@ class LpcaCompressor {
 
   // One pass over the view slots: rows[i] (d values: float, or half bits) gets texel texels[i]'s
   // transformed ABRDF; with a half matrix, float rows get the half-rounded values, so that the
-  // rows gathered out of core equal the in-core matrix's. Per slot, the transpose runs over tiles
-  // of texels (one per thread at a time): for each light, the tile's values are one contiguous run
-  // of the slot, written to the tile's rows. norms (optional): norms[i] = the squared norm of row
-  // i as stored (half-rounded with a half matrix), summed in double in (view, light, channel)
-  // order by the thread that writes the row, so without a pass of its own over the matrix.
+  // rows gathered out of core equal the in-core matrix's. Per slot, one parallel pass over tiles
+  // of kTile texels does the rest, each tile on one thread: for each light, the tile's values
+  // (one contiguous run of the slot where the tile's texels are consecutive, else gathered) are
+  // converted to half (F16C) and range-checked in the thread's buffers and placed in its stage,
+  // the tile's rows for this view (kTile x L x C values); then each row's part of the stage is
+  // copied out in one piece (contiguous writes of the matrix, not C values per row and light).
+  // norms (optional): norms[i] = the squared norm of row i as stored (half-rounded with a half
+  // matrix), summed in double in (view, light, channel) order by the thread that writes the row,
+  // so without a pass of its own over the matrix.
   template <typename T>
   void ReadRows(const std::vector<std::size_t>& texels, const std::vector<T*>& rows, double* norms = nullptr) const {
     static_assert(std::is_same_v<T, float> || std::is_same_v<T, std::uint16_t>);
     BTF_CHECK((std::is_same_v<T, float> || half()));
     const int V = in_.views().size(), L = in_.lights().size(), C = in_.channels();
-    const std::size_t n = in_.slot_size(), tiles = (texels.size() + kTile - 1) / kTile;
-    std::vector<float> slot(n);
-    std::vector<std::uint16_t> halves(half() ? n : 0);
-    const T* src;
-    if constexpr (std::is_same_v<T, float>) src = slot.data();
-    else src = halves.data();
+    const std::size_t tiles = (texels.size() + kTile - 1) / kTile, run = kTile * std::size_t(C);
+    const std::size_t part = std::size_t(L) * std::size_t(C);  // a row's values of one view
+    std::vector<char> consecutive(tiles);
+    for (std::size_t b = 0; b < tiles; ++b) {
+      const std::size_t i0 = b * kTile, i1 = std::min(texels.size(), i0 + kTile);
+      bool c = true;
+      for (std::size_t i = i0; i < i1; ++i) c = c && texels[i] == texels[i0] + (i - i0);
+      consecutive[b] = c;
+    }
+    // Per thread: one light's values of a tile (gathered, or half-rounded), as half bits, and the stage.
+    const std::size_t threads = std::size_t(std::max(1, omp_get_max_threads()));
+    std::vector<float> values(threads * run);
+    std::vector<std::uint16_t> halves(half() ? threads * run : 0);
+    std::vector<T> stages(threads * kTile * part);
+    // Rows that miss texels of the slot (ranks, out-of-core chunks, samples) see only theirs
+    // in the tiles: the slot is range-checked on its own then, so that every read of a slot
+    // refuses what it holds beyond the half range, as one that covers it does.
+    const bool covers = texels.size() == N_;
+    std::vector<float> buffer;  // the slot, where the source does not hold it or the log changes it
     if (norms) std::fill(norms, norms + texels.size(), 0.0);
     for (int v = 0; v < V; ++v) {
       rep_.Progress(std::size_t(v), std::size_t(V), "read");
-      in_.ReadViewSlot(v, slot.data());
-      // With a half matrix and no log, ToHalves' range check also finds NaN and Inf (and then
-      // names them as CheckFiniteSlot does), so the slot is not scanned twice.
-      if (tr_.log || !half()) CheckFiniteSlot(in_, v, slot.data());
-      tr_.Apply(in_, v, slot.data(), slot.size());
-      if (half()) ToHalves(v, slot, halves, std::is_same_v<T, float> || norms);
-      // channels: a compile-time 3 (RGB: the copy inlined, no memmove call per value run) or C.
+      const float* slot = tr_.log ? nullptr : in_.ViewSlotData(v);
+      if (!slot) {
+        buffer.resize(in_.slot_size());
+        in_.ReadViewSlot(v, buffer.data());
+        slot = buffer.data();
+      }
+      // With a half matrix and no log, the range check below also finds NaN and Inf (and
+      // RefuseBeyondHalf names them as CheckFiniteSlot does), so the slot is not scanned twice.
+      if (tr_.log || !half()) CheckFiniteSlot(in_, v, slot);
+      tr_.Apply(in_, v, buffer.data(), buffer.size());  // (with the log, slot is the buffer)
+      bool beyond = false;
+      // channels: a compile-time 3 (RGB: the copies inlined) or C.
       const auto transpose = [&](auto channels) {
         const std::size_t cc = channels;
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) reduction(|| : beyond)
         for (std::ptrdiff_t b = 0; b < static_cast<std::ptrdiff_t>(tiles); ++b) {
-          const std::size_t i0 = std::size_t(b) * kTile, i1 = std::min(texels.size(), i0 + kTile);
+          const std::size_t i0 = std::size_t(b) * kTile, i1 = std::min(texels.size(), i0 + kTile), w = (i1 - i0) * cc;
+          const std::size_t th = std::size_t(omp_get_thread_num());
+          float* own = values.data() + th * run;
+          std::uint16_t* bits = half() ? halves.data() + th * run : nullptr;
+          T* stage = stages.data() + th * kTile * part;
+          bool any = false;
           for (int l = 0; l < L; ++l) {
-            const T* from = src + std::size_t(l) * N_ * cc;
-            const std::size_t at = (std::size_t(v) * L + l) * cc;
-            for (std::size_t i = i0; i < i1; ++i)
-              for (std::size_t c = 0; c < cc; ++c) rows[i][at + c] = from[texels[i] * cc + c];
+            const float* from = slot + std::size_t(l) * N_ * cc;
+            const float* x = from + texels[i0] * cc;  // the tile's values, as float
+            if (!consecutive[std::size_t(b)]) {
+              for (std::size_t i = i0; i < i1; ++i)
+                for (std::size_t c = 0; c < cc; ++c) own[(i - i0) * cc + c] = from[texels[i] * cc + c];
+              x = own;
+            }
+            if (half()) {
+              FloatsToHalves(x, bits, w);
+              for (std::size_t j = 0; j < w; ++j) any |= (bits[j] & 0x7c00u) == 0x7c00u;
+              if (std::is_same_v<T, float> || norms) {  // the stored values, as float
+                HalvesToFloats(bits, own, w);
+                x = own;
+              }
+            }
+            const T* stored;
+            if constexpr (std::is_same_v<T, std::uint16_t>) stored = bits;
+            else stored = x;
+            for (std::size_t j = 0; j < i1 - i0; ++j)
+              for (std::size_t c = 0; c < cc; ++c) stage[j * part + std::size_t(l) * cc + c] = stored[j * cc + c];
             if (!norms) continue;
-            const float* value = slot.data() + std::size_t(l) * N_ * cc;  // the stored values, as float
             for (std::size_t i = i0; i < i1; ++i)
               for (std::size_t c = 0; c < cc; ++c) {
-                const double x = value[texels[i] * cc + c];
-                norms[i] += x * x;
+                const double y = x[(i - i0) * cc + c];
+                norms[i] += y * y;
               }
           }
+          for (std::size_t i = i0; i < i1; ++i) std::copy_n(stage + (i - i0) * part, part, rows[i] + std::size_t(v) * part);
+          beyond = beyond || any;
         }
       };
       if (C == 3) transpose(std::integral_constant<std::size_t, 3>());
       else transpose(std::size_t(C));
+      if (half() && (beyond || (!covers && std::any_of(slot, slot + in_.slot_size(), BeyondHalf))))
+        RefuseBeyondHalf(v, slot);
     }
     ++sum_.lpca_passes;
   }
 
-  // halves = slot as half bits, in threads over static ranges; slot = their values if `round`. A
-  // NaN or Inf is refused as CheckFiniteSlot refuses it, a value beyond the half range naming it
-  // (every rank reads whole slots: all refuse).
-  void ToHalves(int v, std::vector<float>& slot, std::vector<std::uint16_t>& halves, bool round) const {
-    constexpr std::size_t kRange = 1 << 16;
-    const std::ptrdiff_t ranges = static_cast<std::ptrdiff_t>((slot.size() + kRange - 1) / kRange);
-    bool overflow = false;
-#pragma omp parallel for schedule(static) reduction(|| : overflow)
-    for (std::ptrdiff_t r = 0; r < ranges; ++r) {
-      const std::size_t i0 = std::size_t(r) * kRange, m = std::min(kRange, slot.size() - i0);
-      FloatsToHalves(slot.data() + i0, halves.data() + i0, m);
-      bool any = false;
-      for (std::size_t i = i0; i < i0 + m; ++i) any |= (halves[i] & 0x7c00u) == 0x7c00u;
-      overflow = overflow || any;
-    }
-    if (!overflow) {
-      if (round) {
-#pragma omp parallel for schedule(static)
-        for (std::ptrdiff_t r = 0; r < ranges; ++r) {
-          const std::size_t i0 = std::size_t(r) * kRange;
-          HalvesToFloats(halves.data() + i0, slot.data() + i0, std::min(kRange, slot.size() - i0));
-        }
-      }
-      return;
-    }
-    if (!tr_.log) CheckFiniteSlot(in_, v, slot.data());  // after the log, the slot is finite
-    const std::size_t i = std::size_t(std::find_if(halves.begin(), halves.end(), [](std::uint16_t h) {
-                                        return (h & 0x7c00u) == 0x7c00u;
-                                      }) - halves.begin());
+  // Whether x becomes an infinity in half (NaN, Inf, or |x| rounding past kHalfMax: |x| >= 65520).
+  static bool BeyondHalf(float x) { return !(std::fabs(x) < 65520.0f); }
+
+  // Throws for the first value of slot v (in slot order) beyond the half range: a NaN or Inf as
+  // CheckFiniteSlot refuses it, another value naming it (every rank reads whole slots: all refuse).
+  [[noreturn]] void RefuseBeyondHalf(int v, const float* slot) const {
+    if (!tr_.log) CheckFiniteSlot(in_, v, slot);  // after the log, the slot is finite
+    const std::size_t i = std::size_t(std::find_if(slot, slot + in_.slot_size(), BeyondHalf) - slot);
     const std::size_t C = std::size_t(in_.channels()), W = std::size_t(in_.width());
     ThrowBadInput("'{}' holds {} at view {}, light {}, texel (y {}, x {}), channel {}{}: beyond the half range (|x| <= "
                   "{}) of LPCA's texel matrix; use --lpca-matrix float (4 bytes a value instead of 2){}",

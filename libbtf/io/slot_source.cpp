@@ -32,6 +32,7 @@ class MemorySlotSource final : public SlotSource {
     const auto s = d_.view_slot(view);
     std::copy(s.begin(), s.end(), out);
   }
+  const float* ViewSlotData(int view) const override { return d_.view_slot(view).data(); }
   void ReadImage(int view, int light, float* out) const override {
     const auto s = d_.image(view, light);
     std::copy(s.begin(), s.end(), out);

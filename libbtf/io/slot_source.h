@@ -27,6 +27,9 @@ class SlotSource {
   virtual DatasetInfo info() const = 0;
   // lights x height x width x channels floats.
   virtual void ReadViewSlot(int view, float* out) const = 0;
+  // The view slot as ReadViewSlot writes it, where the source holds it in memory (read it there,
+  // without a copy; valid while the source lives), or nullptr (the default): then ReadViewSlot.
+  virtual const float* ViewSlotData(int view) const { return nullptr; }
   // height x width x channels floats (default: reads the view slot and copies one image).
   virtual void ReadImage(int view, int light, float* out) const;
 

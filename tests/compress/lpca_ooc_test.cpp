@@ -185,10 +185,16 @@ TEST(LpcaHalfMatrix, RefusesAValueBeyondTheHalfRangeAndFloatTakesIt) {
   CompressSummary s;
   test::CompressDataset(d, Lpca(8, "in-core", "float"), &s);
   EXPECT_EQ(s.lpca_matrix, "float");
-  // Out of core (whole slots are read on every pass): the same refusal.
+  // Out of core (2 texel chunks: each pass reads whole slots but writes rows of one chunk): the
+  // same refusal, word for word, also for a value in the second chunk only (y 95: texel 9127).
   const ScopedMaxBytes limit(kLimit);
   const std::string o = test::ErrorOf([&] { test::CompressDataset(d, Lpca(8, "out-of-core", "half")); });
-  EXPECT_NE(o.find("--lpca-matrix float"), std::string::npos) << o;
+  EXPECT_EQ(o, e);
+  d.at(1, 2, 5, 7, 1) = 0;
+  d.at(1, 2, 95, 7, 1) = 70000;
+  const std::string late = test::ErrorOf([&] { test::CompressDataset(d, Lpca(8, "in-core", "half")); });
+  EXPECT_NE(late.find("view 1, light 2, texel (y 95, x 7), channel 1"), std::string::npos) << late;
+  EXPECT_EQ(test::ErrorOf([&] { test::CompressDataset(d, Lpca(8, "out-of-core", "half")); }), late);
 }
 
 }  // namespace
