@@ -191,10 +191,10 @@ TEST(Pca, RowsInBlocksGiveTheSameBytesAndTheRandomizedPathHoldsOneBlock) {
       EXPECT_EQ(blocks.residual_energy, whole.residual_energy);
       EXPECT_TRUE(in_order);
       if (n == 300) {
-        // At most one block at a time (read in runs of a few rows); the passes: moments, centring
-        // with Xc Omega, per subspace iteration Xc^T Q and Xc Qz (2 cold, 1 warm), Q^T Xc, the scores.
+        // At most one block at a time (read in runs of a few rows); the passes: the moments with
+        // Z = Xc^T Xc Omega, one per subspace iteration (2 cold, 1 warm), the final Y = Xc V.
         EXPECT_LE(largest, kPcaBlockRows);
-        EXPECT_EQ(requested, n * (warm ? 6 : 8));
+        EXPECT_EQ(requested, n * (warm ? 3 : 4));
       } else {
         EXPECT_EQ(largest, n);  // the Gram path: all rows at once, once
         EXPECT_EQ(requested, n);
