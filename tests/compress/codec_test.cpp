@@ -138,7 +138,7 @@ TEST(Pca, WarmStartFromAPreviousFitLosesLittle) {
   const PcaResult before = Pca(prev, lpca);
   ASSERT_TRUE(before.randomized);
   ASSERT_EQ(before.components(), 8);
-  // The Gram path ignores a start; the randomized path (LPCA's default limit) takes it (5 passes).
+  // The Gram path ignores a start; the randomized path (LPCA's default limit) takes it (3 passes).
   const PcaResult gram_started = Pca(X, q, &before.basis);
   EXPECT_FALSE(gram.randomized);
   EXPECT_EQ(gram_started.basis, gram.basis);
