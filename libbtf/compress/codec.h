@@ -115,8 +115,8 @@ struct CompressOptions {
   int gram_limit = 256;
   // LPCA: a cluster refitted by the randomized path (more than gram_limit texels) after a
   // reassignment, or in the first fit over all texels (from the sample rounds' models), starts
-  // from its previous basis plus 10 Gaussian columns with 1 subspace iteration (5 passes over its
-  // rows instead of 7) instead of a Gaussian sketch; false: every fit starts cold as before
+  // from its previous basis plus 10 Gaussian columns with 1 subspace iteration (3 passes over its
+  // rows instead of 4) instead of a Gaussian sketch; false: every fit starts cold as before
   // 2026-12-03.
   bool lpca_warm_start = true;
   // LPCA: each reassignment of all texels computes a texel's residual only under the clusters that

@@ -115,9 +115,9 @@ void BasisFromLeft(const RowMatrixXf& Xc, const MatrixXd& U, const std::vector<d
   Orthonormalize(r.basis);
 }
 
-Eigen::MatrixXd Orth(const Eigen::MatrixXf& Y) {
-  const MatrixXd yd = Y.cast<double>();
-  Eigen::HouseholderQR<MatrixXd> qr(yd);
+// An orthonormal basis (Householder QR, in double) of Y's columns.
+MatrixXd Orth(const MatrixXd& Y) {
+  Eigen::HouseholderQR<MatrixXd> qr(Y);
   return qr.householderQ() * MatrixXd::Identity(Y.rows(), Y.cols());
 }
 
@@ -176,70 +176,100 @@ PcaResult GramPca(const RowMatrixXf& Xc, PcaResult r, const PcaRequest& q, int l
   return r;
 }
 
-// The randomized path over X's rows in blocks of kPcaBlockRows (one block held at a time, centred
-// as it is read): moments; Y = Xc Omega with the centred energy; per subspace iteration
-// Z = Xc^T Q (summed block by block) and Y = Xc Qz; B = Q^T Xc; scores = Xc basis^T.
+// The randomized path over X's rows in blocks of kPcaBlockRows (one block held at a time), in
+// 2 + iterations passes, each computing, block by block, Y_b = X_b V and (all but the last)
+// Z += X_b^T Y_b, i.e. Z = X^T X V (the span of X^T Q for Q = orth(Y), one subspace iteration
+// per pass):
+//   pass 1: rows shifted by the first block's mean m0 (not yet the mean), the moments; with the
+//     mean known, Z is corrected to the centred rows' Xc^T Xc Omega (a rank-two update in double);
+//   passes 2 ..: the centred rows Xc, V = orth(Z);
+//   the last: Y = Xc V alone; the basis is the best of span(V) (the eigenvectors W of Y^T Y,
+//     basis^T = V W) and the scores are Y W, no further pass.
+// After i iterations the basis lies in span((Xc^T Xc)^(i + 1) Omega), as with the two passes per
+// iteration, B = Q^T Xc and the scores' pass of before (8 passes cold, 6 warm).
 PcaResult RandomizedPca(const PcaRows& X, PcaResult r, const PcaRequest& q, const RowMatrixXf* start, int limit) {
   const Eigen::Index n = X.rows, d = X.cols;
-  constexpr Eigen::Index kRun = 8;  // rows read and centred together, while they are in L2
+  constexpr Eigen::Index kRun = 8;  // rows read and shifted together, while they are in L2
   RowMatrixXf T;
-  // f(first, T) for each block of rows [first, first + T.rows()), centred once the mean is known.
-  auto pass = [&](bool centre, auto&& f) {
+  Eigen::RowVectorXf shift;  // subtracted from every row read: empty until the first block is in
+  // f(first, T) for each block of rows [first, first + T.rows()), shifted as they are read.
+  auto pass = [&](auto&& f) {
     for (Eigen::Index b = 0; b < n; b += kPcaBlockRows) {
       T.resize(std::min(kPcaBlockRows, n - b), d);
+      const bool shifted = shift.size() == d;
       for (Eigen::Index i = 0; i < T.rows(); i += kRun) {
         const Eigen::Index m = std::min(kRun, T.rows() - i);
         X.get(b + i, m, T.row(i).data());
-        if (centre) T.middleRows(i, m).rowwise() -= r.mean.transpose();
+        if (shifted) T.middleRows(i, m).rowwise() -= shift;
+      }
+      if (!shifted) {  // the first block: its mean (in double) is m0
+        Eigen::RowVectorXd sum = Eigen::RowVectorXd::Zero(d);
+        for (Eigen::Index i = 0; i < T.rows(); ++i) sum += T.row(i).cast<double>();
+        shift = (sum / double(T.rows())).cast<float>();
+        T.rowwise() -= shift;
       }
       f(b, T);
     }
   };
-  Eigen::VectorXd sum = Eigen::VectorXd::Zero(d);
-  pass(false, [&](Eigen::Index, const RowMatrixXf& x) { AddMoments(x, sum, r.total_energy); });
-  r.mean = (sum / double(n)).cast<float>();
   r.randomized = true;
   const int want = std::min(q.max_components, limit);
   const Eigen::Index rank = std::min<Eigen::Index>(want + q.oversampling, std::min(n, d));
   const bool warm = start && start->rows() > 0 && start->cols() == d;
   std::mt19937_64 rng(q.seed);
   std::normal_distribution<float> normal(0.0f, 1.0f);
-  Eigen::MatrixXf omega(d, rank);
+  Eigen::MatrixXf V(d, rank);
   const Eigen::Index warm_cols = warm ? std::min(start->rows(), rank) : 0;
-  if (warm_cols > 0) omega.leftCols(warm_cols) = start->topRows(warm_cols).transpose();
+  if (warm_cols > 0) V.leftCols(warm_cols) = start->topRows(warm_cols).transpose();
   for (Eigen::Index j = warm_cols; j < rank; ++j)
-    for (Eigen::Index i = 0; i < d; ++i) omega(i, j) = normal(rng);
-  Eigen::MatrixXf Y(n, rank);
-  r.centered_energy = 0;
-  pass(true, [&](Eigen::Index b, const RowMatrixXf& xc) {
-    for (Eigen::Index i = 0; i < xc.rows(); ++i) r.centered_energy += xc.row(i).cast<double>().squaredNorm();
-    Y.middleRows(b, xc.rows()).noalias() = xc * omega;
+    for (Eigen::Index i = 0; i < d; ++i) V(i, j) = normal(rng);
+  Eigen::MatrixXf Yb(kPcaBlockRows, rank), Z = Eigen::MatrixXf::Zero(d, rank);
+  auto sketch = [&](Eigen::Index, const RowMatrixXf& x) {
+    auto y = Yb.topRows(x.rows());
+    y.noalias() = x * V;
+    Z.noalias() += x.transpose() * y;
+  };
+  // Pass 1: rows x0 = x - m0; s0 = sum x0 and e0 = sum ||x0||^2 in double.
+  Eigen::VectorXd s0 = Eigen::VectorXd::Zero(d);
+  double e0 = 0;
+  pass([&](Eigen::Index b, const RowMatrixXf& x0) {
+    AddMoments(x0, s0, e0);
+    if (want > 0) sketch(b, x0);
   });
+  const Eigen::VectorXd m0 = shift.transpose().cast<double>();
+  r.mean = (m0 + s0 / double(n)).cast<float>();
+  // With delta = mean - m0 (exact in double), Xc = X0 - 1 delta^T:
+  //   sum ||x||^2 = e0 + 2 m0.s0 + n |m0|^2,  sum ||xc||^2 = e0 - 2 delta.s0 + n |delta|^2,
+  //   Xc^T Xc V = X0^T X0 V - s0 (V^T delta)^T - delta (V^T s0 - n V^T delta)^T.
+  // Cancellation is mild: X0 is centred up to the first block's sampling error.
+  const Eigen::VectorXd delta = r.mean.cast<double>() - m0;
+  r.total_energy = e0 + 2 * m0.dot(s0) + double(n) * m0.squaredNorm();
+  r.centered_energy = std::max(0.0, e0 - 2 * delta.dot(s0) + double(n) * delta.squaredNorm());
   if (want <= 0 || r.centered_energy <= 0) {
     r.randomized = false;
     return NoComponents(std::move(r), n, d);
   }
-  MatrixXd Q = Orth(Y);
+  const MatrixXd Vd = V.cast<double>();
+  const Eigen::VectorXd u = Vd.transpose() * delta, v = Vd.transpose() * s0;
+  MatrixXd Zd = Z.cast<double>() - s0 * u.transpose() - delta * (v - double(n) * u).transpose();
+  shift = r.mean.transpose();
   for (int it = 0; it < (warm ? q.warm_power_iterations : q.power_iterations); ++it) {
-    const Eigen::MatrixXf Qf = Q.cast<float>();
-    Eigen::MatrixXf Z = Eigen::MatrixXf::Zero(d, rank);
-    pass(true, [&](Eigen::Index b, const RowMatrixXf& xc) { Z.noalias() += xc.transpose() * Qf.middleRows(b, xc.rows()); });
-    const Eigen::MatrixXf Qz = Orth(Z).cast<float>();
-    pass(true, [&](Eigen::Index b, const RowMatrixXf& xc) { Y.middleRows(b, xc.rows()).noalias() = xc * Qz; });
-    Q = Orth(Y);
+    V = Orth(Zd).cast<float>();
+    Z.setZero();
+    pass(sketch);
+    Zd = Z.cast<double>();
   }
-  const Eigen::MatrixXf Qf = Q.cast<float>();
-  RowMatrixXf B = RowMatrixXf::Zero(rank, d);
-  pass(true, [&](Eigen::Index b, const RowMatrixXf& xc) { B.noalias() += Qf.middleRows(b, xc.rows()).transpose() * xc; });
-  const MatrixXd G = GramOfRows(B);
-  Eigen::SelfAdjointEigenSolver<MatrixXd> es(G.selfadjointView<Eigen::Lower>());
-  const MatrixXd U = es.eigenvectors().rowwise().reverse();
+  V = Orth(Zd).cast<float>();
+  Eigen::MatrixXf Y(n, rank);
+  pass([&](Eigen::Index b, const RowMatrixXf& xc) { Y.middleRows(b, xc.rows()).noalias() = xc * V; });
+  // Rayleigh-Ritz in span(V): Y^T Y = W Lambda W^T (double); basis^T = V W, scores = Y W.
+  const MatrixXd Y64 = Y.cast<double>();
+  Eigen::SelfAdjointEigenSolver<MatrixXd> es(Y64.transpose() * Y64);
+  const MatrixXd W = es.eigenvectors().rowwise().reverse();
   std::vector<double> eig;
   for (Eigen::Index k = rank - 1; k >= 0; --k) eig.push_back(std::max(0.0, es.eigenvalues()[k]));
   const int c = ChooseComponents(eig, q, r, limit);
-  BasisFromLeft(B, U, eig, c, r);
-  r.scores.resize(n, r.basis.rows());
-  pass(true, [&](Eigen::Index b, const RowMatrixXf& xc) { r.scores.middleRows(b, xc.rows()).noalias() = xc * r.basis.transpose(); });
+  r.basis = (V.cast<double>() * W.leftCols(c)).transpose().cast<float>();
+  r.scores = (Y64 * W.leftCols(c)).cast<float>();
   FinishScores(r);
   return r;
 }

@@ -18,9 +18,11 @@ struct PcaRequest {
   double retained_energy = 0;  // > 0: smallest c retaining this fraction of the centered energy
   int gram_limit = 256;        // Gram/covariance path when min(n, d) <= gram_limit
   int oversampling = 10;       // randomized path: extra sketch columns
-  int power_iterations = 2;    // randomized path: subspace iterations
-  // Randomized path started from a previous basis (Pca's `start`): subspace iterations after the
-  // first product X_c V0 (1: 5 passes over X instead of 7).
+  // Randomized path: subspace iterations, one pass over the rows each; with the first pass (the
+  // moments and X_c^T X_c Omega) and the last (X_c V, the scores), 2 + power_iterations passes.
+  int power_iterations = 2;
+  // Randomized path started from a previous basis (Pca's `start`): subspace iterations instead
+  // of power_iterations (1: 3 passes over X instead of 4).
   int warm_power_iterations = 1;
   std::uint64_t seed = 1;
 };

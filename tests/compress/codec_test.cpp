@@ -114,7 +114,8 @@ TEST(Pca, LpcaGramLimitTakesTheRandomizedPathForLargeClustersAndItLosesLittle) {
   // (beyond 1e-6, rounding). The reconstruction's squared error in double (residual_energy
   // subtracts the captured energy, about 1e4 times the residual here, so its float rounding
   // moves it by ~1e-4 relative: measured 1.5e-4 below the Gram's with the blocked passes, 6.8e-5
-  // above with whole-matrix products); measured -5.4e-8, bounded at 1e-3.
+  // above with whole-matrix products); measured -3.9e-8 with one pass per subspace iteration
+  // (2026-12-03), bounded at 1e-3.
   const double excess = ReconstructionError(X, rnd) / ReconstructionError(X, gram) - 1;
   EXPECT_GT(excess, -1e-6);
   EXPECT_LT(excess, 1e-3);
@@ -138,7 +139,7 @@ TEST(Pca, WarmStartFromAPreviousFitLosesLittle) {
   const PcaResult before = Pca(prev, lpca);
   ASSERT_TRUE(before.randomized);
   ASSERT_EQ(before.components(), 8);
-  // The Gram path ignores a start; the randomized path (LPCA's default limit) takes it (5 passes).
+  // The Gram path ignores a start; the randomized path (LPCA's default limit) takes it (3 passes).
   const PcaResult gram_started = Pca(X, q, &before.basis);
   EXPECT_FALSE(gram.randomized);
   EXPECT_EQ(gram_started.basis, gram.basis);
@@ -148,8 +149,8 @@ TEST(Pca, WarmStartFromAPreviousFitLosesLittle) {
   // The reconstruction's squared error ||X - mean - scores basis||^2 in double (residual_energy
   // subtracts the captured energy, 1e4 times the residual here, so float rounding of the basis
   // moves it by ~1e-3 relative). From the previous basis (and 10 Gaussian columns), one subspace
-  // iteration: measured 2.8e-8 above the Gram's (the optimum up to rounding, so at rounding
-  // level); bounded at 1e-5 (350x margin, 100x below the cold randomized path's bound above).
+  // iteration: measured 2.4e-8 above the Gram's (the optimum up to rounding, so at rounding
+  // level); bounded at 1e-5 (400x margin, 100x below the cold randomized path's bound above).
   const double excess = ReconstructionError(X, warm) / ReconstructionError(X, gram) - 1;
   EXPECT_GT(excess, -1e-6);
   EXPECT_LT(excess, 1e-5);
@@ -191,10 +192,10 @@ TEST(Pca, RowsInBlocksGiveTheSameBytesAndTheRandomizedPathHoldsOneBlock) {
       EXPECT_EQ(blocks.residual_energy, whole.residual_energy);
       EXPECT_TRUE(in_order);
       if (n == 300) {
-        // At most one block at a time (read in runs of a few rows); the passes: moments, centring
-        // with Xc Omega, per subspace iteration Xc^T Q and Xc Qz (2 cold, 1 warm), Q^T Xc, the scores.
+        // At most one block at a time (read in runs of a few rows); the passes: the moments with
+        // Z = Xc^T Xc Omega, one per subspace iteration (2 cold, 1 warm), the final Y = Xc V.
         EXPECT_LE(largest, kPcaBlockRows);
-        EXPECT_EQ(requested, n * (warm ? 6 : 8));
+        EXPECT_EQ(requested, n * (warm ? 3 : 4));
       } else {
         EXPECT_EQ(largest, n);  // the Gram path: all rows at once, once
         EXPECT_EQ(requested, n);
@@ -203,12 +204,54 @@ TEST(Pca, RowsInBlocksGiveTheSameBytesAndTheRandomizedPathHoldsOneBlock) {
   }
 }
 
+TEST(Pca, RandomizedPathCentresExactlyWhenTheFirstBlockIsUnrepresentative) {
+  // The randomized path's first pass shifts rows by the first block's mean, not the cluster's,
+  // and corrects Z and the energies in double afterwards. Make that shift wrong on purpose: the
+  // cluster-shaped matrix (300 x 2000, three blocks of kPcaBlockRows = 128) far from the origin
+  // (mean 101 instead of 1) with its first block's rows moved by +1 (their mean 0.57 per value
+  // away from the cluster's: n |mean - m0|^2 = 2.0e5, 0.22 of the centred energy 8.7e5).
+  RowMatrixXf X = ClusterShaped(300, 3);
+  X.array() += 100.0f;
+  X.topRows(kPcaBlockRows).array() += 1.0f;
+  PcaRequest q;
+  q.max_components = 8;
+  const PcaResult rnd = Pca(X, q);  // LPCA's default gram_limit (256): randomized
+  q.gram_limit = 1024;
+  const PcaResult gram = Pca(X, q);  // centres exactly, the optimum up to rounding
+  ASSERT_TRUE(rnd.randomized);
+  ASSERT_EQ(rnd.components(), 8);
+  // The energies from the corrected sums against the Gram path's sums of the centred rows:
+  // measured 6e-15 and 2e-15 relative; bounded at 1e-8 (double sums of float rows). Without the
+  // correction the centred energy would be off by n |mean - m0|^2, 0.22 relative.
+  EXPECT_NEAR(rnd.total_energy, gram.total_energy, 1e-8 * gram.total_energy);
+  EXPECT_NEAR(rnd.centered_energy, gram.centered_energy, 1e-8 * gram.centered_energy);
+  EXPECT_LE((rnd.mean - gram.mean).cwiseAbs().maxCoeff(), 1e-5f);  // measured 0 (the same floats)
+  // The fit: the reconstruction's squared error in double against the Gram's, measured 2.2e-8
+  // above; bounded at 1e-5 as the warm start's. (Without Z's correction the fit stays as good,
+  // the last pass works on centred rows and the offset only takes one of the sketch's columns;
+  // without the energies' correction the two checks above and the residual's below fail.)
+  const double excess = ReconstructionError(X, rnd) / ReconstructionError(X, gram) - 1;
+  EXPECT_GT(excess, -1e-6);
+  EXPECT_LT(excess, 1e-5);
+  // residual_energy (centred energy minus the scores' squared norms) against that error: the
+  // captured energy is 1e4 times the residual, so float rounding of the scores (~1e-7) moves it
+  // by up to ~1e-3 relative; measured 6.3e-5, bounded at 1e-3.
+  EXPECT_NEAR(rnd.residual_energy, ReconstructionError(X, rnd), 1e-3 * rnd.residual_energy);
+  const Eigen::MatrixXf g = rnd.basis * rnd.basis.transpose();
+  EXPECT_LT((g - Eigen::MatrixXf::Identity(8, 8)).cwiseAbs().maxCoeff(), 1e-5);
+}
+
 TEST(Pca, ConstantDataHasNoComponents) {
-  RowMatrixXf X = RowMatrixXf::Constant(10, 50, 0.25f);
-  const PcaResult r = Pca(X, PcaRequest{});
-  EXPECT_EQ(r.components(), 0);
-  EXPECT_FLOAT_EQ(r.mean[7], 0.25f);
-  EXPECT_EQ(r.residual_energy, 0.0);
+  // 10 x 50 takes the Gram path, 300 x 2000 the randomized one (its energies from sums of rows
+  // shifted by the first block's mean: exactly zero here).
+  for (const Eigen::Index n : {10, 300}) {
+    RowMatrixXf X = RowMatrixXf::Constant(n, n == 10 ? 50 : 2000, 0.25f);
+    const PcaResult r = Pca(X, PcaRequest{});
+    EXPECT_EQ(r.components(), 0);
+    EXPECT_FLOAT_EQ(r.mean[7], 0.25f);
+    EXPECT_EQ(r.centered_energy, 0.0);
+    EXPECT_EQ(r.residual_energy, 0.0);
+  }
 }
 
 TEST(Pca, TargetErrorPicksTheSmallestSufficientCount) {
