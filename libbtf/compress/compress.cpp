@@ -531,10 +531,29 @@ class LpcaCompressor {
   static constexpr std::size_t kTile = 64;       // texels per transpose tile (ReadRows)
   static constexpr int kLloydRounds = 100;       // k-means rounds at most
   static constexpr double kLloydTolerance = 1e-5;  // stop when the objective improves by less (relative)
-  // The reassignment sketch's span: each cluster's mean and its first basis row. Measured on the
-  // 64^2 twill (k = 32, c = 8): 4.2 / 2.2 / 1.35 clusters compared per texel with 0 / 1 / 3 rows,
-  // for a sketch of 32 / 64 / 128 dimensions (its cost, once: two GEMMs of that width).
+  // The reassignment sketch's span: each cluster's mean and its first basis row. On the 64^2
+  // twill (k = 32, c = 8): 4.2 / 2.2 / 1.35 clusters compared per texel with 0 / 1 / 3 rows, for a
+  // sketch of 32 / 64 / 128 dimensions (its cost, once: two GEMMs of that width); measured with
+  // temporary builds (docs/btf-compress.md, "Pruned reassignment").
   static constexpr int kSketchBasisRows = 1;
+
+  // A reassignment sketch (lpca_reassign.h) with, per row it was built for, the row's coordinates
+  // g (rows x dims, row-major) and residual e.
+  struct Sketch {
+    ReassignSketch bounds;
+    std::vector<float> g;
+    std::vector<double> e;
+    Sketch() = default;
+    Sketch(const std::vector<PcaResult>& pca, std::size_t d, std::size_t rows)
+        : bounds(pca, d, kSketchBasisRows), g(rows * std::size_t(bounds.dims())), e(rows) {}
+    std::size_t dims() const { return std::size_t(bounds.dims()); }
+    // Rows [first, first + X.rows()) from their values X.
+    void Project(const RowMatrixXf& X, std::size_t first) { bounds.Project(X, g.data() + first * dims(), e.data() + first); }
+    // Candidates of rows [first, first + count) (norm2: their squared norms).
+    void Candidates(std::size_t first, std::size_t count, const double* norm2, std::vector<std::vector<int>>& out) const {
+      bounds.Candidates(g.data() + first * dims(), e.data() + first, norm2, count, out);
+    }
+  };
 
   // First texel of rank r's range (whole blocks, ranges contiguous in rank order).
   std::size_t TexelBegin(int r) const {
@@ -930,22 +949,14 @@ class LpcaCompressor {
 
   // The sample rounds' reassignment sketch (o_.lpca_prune): built from the first fit of Lloyd's
   // clusters, with the sample texels' coordinates (sample order) and residuals.
-  struct SampleSketch {
-    ReassignSketch sketch;
-    std::vector<float> g;
-    std::vector<double> e;
-  };
   template <typename Mat>
-  SampleSketch MakeSampleSketch(const Mat& M, const std::vector<std::size_t>& rows, const std::vector<PcaResult>& pca) const {
-    SampleSketch s{ReassignSketch(pca, d_, kSketchBasisRows), {}, {}};
-    const std::size_t m = std::size_t(s.sketch.dims());
-    s.g.assign(rows.size() * m, 0.0f);
-    s.e.assign(rows.size(), 0.0);
-    if (m == 0) return s;
+  Sketch MakeSampleSketch(const Mat& M, const std::vector<std::size_t>& rows, const std::vector<PcaResult>& pca) const {
+    Sketch s(pca, d_, rows.size());
+    if (s.bounds.empty()) return s;
     ForBlocks(rows.size(), [&](std::size_t first, std::size_t count) {
       RowMatrixXf X(static_cast<Eigen::Index>(count), M.cols());
       for (Eigen::Index i = 0; i < X.rows(); ++i) RowToFloat(M, static_cast<Eigen::Index>(rows[first + std::size_t(i)]), X.row(i).data());
-      s.sketch.Project(X, s.g.data() + first * m, s.e.data() + first);
+      s.Project(X, first);
     });
     return s;
   }
@@ -969,7 +980,7 @@ class LpcaCompressor {
     ClusterFit fit{{}, std::move(assign), 0, {}};
     FitSample(M, rows, energy, residual, fit, nullptr);
     errors.push_back(fit.error);
-    SampleSketch sketch;
+    Sketch sketch;
     if (o_.lpca_prune) sketch = MakeSampleSketch(M, rows, fit.pca);
     RoundsOnSample(M, norms, rows, energy, residual, fit, &errors, sketch);
     for (int s = 0; s < o_.lpca_splits; ++s) {
@@ -991,7 +1002,7 @@ class LpcaCompressor {
   template <typename Mat>
   void RoundsOnSample(const Mat& M, const double* norms, const std::vector<std::size_t>& rows, double energy,
                       std::vector<double>& residual, ClusterFit& fit, std::vector<double>* errors,
-                      SampleSketch& sketch) const {
+                      Sketch& sketch) const {
     for (int it = 0; it < o_.max_iterations; ++it) {
       ClusterFit next{{}, fit.assign, 0, {}};
       if (ReassignSample(M, norms, rows, fit.pca, next.assign, residual, sketch) == 0) break;
@@ -1104,21 +1115,21 @@ class LpcaCompressor {
   template <typename Mat>
   std::size_t ReassignSample(const Mat& M, const double* norms, const std::vector<std::size_t>& rows,
                              const std::vector<PcaResult>& pca, std::vector<std::int32_t>& assign,
-                             std::vector<double>& residual, SampleSketch& sketch) const {
-    const std::size_t S = rows.size(), m = std::size_t(sketch.sketch.dims());
+                             std::vector<double>& residual, Sketch& sketch) const {
+    const std::size_t S = rows.size();
     const std::vector<int> fitted = Fitted(pca);
-    if (!sketch.sketch.empty()) sketch.sketch.SetClusters(pca);
+    if (!sketch.bounds.empty()) sketch.bounds.SetClusters(pca);
     residual.resize(S);
     std::vector<std::uint8_t> changed(S, 0);
     ForBlocks(S, [&](std::size_t first, std::size_t count) {
       std::vector<std::vector<int>> candidates;
-      if (!sketch.sketch.empty()) {
+      if (!sketch.bounds.empty()) {
         std::vector<double> norm2(count);
         for (std::size_t i = 0; i < count; ++i) norm2[i] = norms[rows[first + i]];
-        sketch.sketch.Candidates(sketch.g.data() + first * m, sketch.e.data() + first, norm2.data(), count, candidates);
+        sketch.Candidates(first, count, norm2.data(), candidates);
       }
       BestClusters(M, [&](std::size_t i) { return Eigen::Index(rows[first + i]); }, count, pca, fitted,
-                   sketch.sketch.empty() ? nullptr : &candidates, assign.data() + first, residual.data() + first,
+                   sketch.bounds.empty() ? nullptr : &candidates, assign.data() + first, residual.data() + first,
                    changed.data() + first, nullptr);
     });
     return std::accumulate(changed.begin(), changed.end(), std::size_t(0));
@@ -1428,30 +1439,25 @@ class LpcaCompressor {
   // built at the first reassignment, from its models, with each texel's sketch coordinates),
   // which always hold the best: the same assignment either way.
   std::size_t Reassign(const std::vector<PcaResult>& pca, std::vector<std::int32_t>& assign) {
-    const bool build = o_.lpca_prune && sketch_.empty() && sketch_g_.empty();
-    if (build) {
-      sketch_ = ReassignSketch(pca, d_, kSketchBasisRows);
-      sketch_g_.assign(N_ * std::size_t(sketch_.dims()), 0.0f);
-      sketch_e_.assign(N_, 0.0);
-    }
-    if (!sketch_.empty()) sketch_.SetClusters(pca);
+    const bool build = o_.lpca_prune && sketch_.e.empty();
+    if (build) sketch_ = Sketch(pca, d_, N_);
+    if (!sketch_.bounds.empty()) sketch_.bounds.SetClusters(pca);
     const std::vector<int> fitted = Fitted(pca);
-    const std::size_t m = std::size_t(sketch_.dims());
     std::vector<std::uint8_t> changed(N_, 0);
     std::vector<std::uint32_t> compared(N_, 0);
     ForChunks([&] { A_.Visit([&](const auto& M) { ForBlocks(local(), [&](std::size_t b, std::size_t count) {
       const std::size_t t = t0_ + b;  // the block's first texel
       std::vector<std::vector<int>> candidates;
-      if (!sketch_.empty()) {
+      if (!sketch_.bounds.empty()) {
         if (build) {
           RowMatrixXf X;
           A_.Rows(b, count, X);
-          sketch_.Project(X, sketch_g_.data() + t * m, sketch_e_.data() + t);
+          sketch_.Project(X, t);
         }
-        sketch_.Candidates(sketch_g_.data() + t * m, sketch_e_.data() + t, norms_.data() + t, count, candidates);
+        sketch_.Candidates(t, count, norms_.data() + t, candidates);
       }
       BestClusters(M, [&](std::size_t i) { return Eigen::Index(b + i); }, count, pca, fitted,
-                   sketch_.empty() ? nullptr : &candidates, assign.data() + t, residual_.data() + t, changed.data() + t,
+                   sketch_.bounds.empty() ? nullptr : &candidates, assign.data() + t, residual_.data() + t, changed.data() + t,
                    compared.data() + t);
     }); }); });
     // Mean clusters compared per texel (this rank's texels; the sum of integers is exact).
@@ -1557,11 +1563,9 @@ class LpcaCompressor {
   double total_ = 0;
   double residual_energy_ = 0;
   std::vector<double> residual_;  // every texel's squared residual under its cluster (after Reassign)
-  // The reassignment's sketch (o_.lpca_prune): built at the first reassignment; per texel its
-  // coordinates (N_ x dims, row-major; on each rank only its own texels' are set) and residual.
-  ReassignSketch sketch_;
-  std::vector<float> sketch_g_;
-  std::vector<double> sketch_e_;
+  // The reassignment's sketch (o_.lpca_prune): built at the first reassignment, with every
+  // texel's row (on each rank only its own texels' are set).
+  Sketch sketch_;
 };
 
 // ---------------------------------------------------------------------------------------------
