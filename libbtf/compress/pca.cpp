@@ -17,12 +17,41 @@ namespace {
 using MatrixXd = Eigen::MatrixXd;
 constexpr Eigen::Index kBlock = 2048;  // columns/rows per double block (fits L2 with n <= 256)
 
-// Adds X's rows to `sum` and their squared norms to `total` (double), row by row in order.
+// Adds X's rows to `sum` and their squared norms to `total` (double). The rows are taken in runs
+// of kRun: each column's sum is loaded once per run and the run's values added to it row by row
+// (so `sum` is the row-by-row sum in row order); the squares go to 4 x 4 double accumulators
+// (row mod 4, column mod 4), added to `total` per run. The result depends only on X. (Before:
+// one row at a time with Eigen, 6.7x slower on a 128 x 19683 block, whose column sums crossed L2
+// once per row.)
 void AddMoments(const Eigen::Ref<const RowMatrixXf>& X, Eigen::VectorXd& sum, double& total) {
-  for (Eigen::Index i = 0; i < X.rows(); ++i) {
-    const auto row = X.row(i).cast<double>();
-    sum += row.transpose();
-    total += row.squaredNorm();
+  constexpr Eigen::Index kRun = 8;
+  const Eigen::Index d = X.cols();
+  double* s = sum.data();
+  for (Eigen::Index i = 0; i < X.rows(); i += kRun) {
+    const Eigen::Index m = std::min(kRun, X.rows() - i);
+    const float* r[kRun];
+    for (Eigen::Index k = 0; k < m; ++k) r[k] = X.row(i + k).data();
+    double lanes[4][4] = {};
+    Eigen::Index j = 0;
+    for (; j + 4 <= d; j += 4) {
+      double a0 = s[j], a1 = s[j + 1], a2 = s[j + 2], a3 = s[j + 3];
+      for (Eigen::Index k = 0; k < m; ++k) {
+        const double v0 = r[k][j], v1 = r[k][j + 1], v2 = r[k][j + 2], v3 = r[k][j + 3];
+        a0 += v0, a1 += v1, a2 += v2, a3 += v3;
+        double* q = lanes[k & 3];
+        q[0] += v0 * v0, q[1] += v1 * v1, q[2] += v2 * v2, q[3] += v3 * v3;
+      }
+      s[j] = a0, s[j + 1] = a1, s[j + 2] = a2, s[j + 3] = a3;
+    }
+    double t = 0;
+    for (; j < d; ++j)
+      for (Eigen::Index k = 0; k < m; ++k) {
+        const double v = r[k][j];
+        s[j] += v;
+        t += v * v;
+      }
+    for (const auto& q : lanes) t += (q[0] + q[1]) + (q[2] + q[3]);
+    total += t;
   }
 }
 
