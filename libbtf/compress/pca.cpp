@@ -242,8 +242,8 @@ PcaResult RandomizedPca(const PcaRows& X, PcaResult r, const PcaRequest& q, cons
   };
   r.randomized = true;
   const int want = std::min(q.max_components, limit);
-  const Eigen::Index rank = std::min<Eigen::Index>(want + q.oversampling, std::min(n, d));
   const bool warm = start && start->rows() > 0 && start->cols() == d;
+  const Eigen::Index rank = std::min<Eigen::Index>(want + (warm ? q.warm_oversampling : q.oversampling), std::min(n, d));
   std::mt19937_64 rng(q.seed);
   std::normal_distribution<float> normal(0.0f, 1.0f);
   Eigen::MatrixXf V(d, rank);
