@@ -423,8 +423,20 @@ std::size_t DecodeSlots(benchmark::State& st, const btf::Codec& c, std::int64_t 
   return out.size();
 }
 
+// The codec of Arg 0 (0 pca-view, 1 lpca), made by BM_PcaView/0 or BM_Lpca; where a
+// --benchmark_filter left those out, none: the benchmark is skipped with a message saying so.
+const btf::Codec* DecodedCodec(benchmark::State& st) {
+  const auto& codec = st.range(0) == 0 ? PcaCodec() : LpcaCodec();
+  if (!codec)
+    st.SkipWithError(st.range(0) == 0 ? "no codec: include BM_PcaView/0 in --benchmark_filter"
+                                      : "no codec: include a BM_Lpca in --benchmark_filter");
+  return codec.get();
+}
+
 void BM_DecodeViewSlot(benchmark::State& st) {
-  const btf::Codec& c = st.range(0) == 0 ? *PcaCodec() : *LpcaCodec();
+  const btf::Codec* codec = DecodedCodec(st);
+  if (!codec) return;
+  const btf::Codec& c = *codec;
   const std::size_t values = DecodeSlots(st, c, st.range(1));
   st.SetLabel(std::string(st.range(0) == 0 ? "pca-view" : "lpca") + (st.range(1) == 1 ? ", 1 thread" : ", all threads"));
   // One slot = L images = L x H x W texel values.
@@ -443,7 +455,9 @@ BENCHMARK(BM_DecodeViewSlot)
     ->UseRealTime();
 
 void BM_DecodeValue(benchmark::State& st) {
-  const btf::Codec& c = st.range(0) == 0 ? *PcaCodec() : *LpcaCodec();
+  const btf::Codec* codec = DecodedCodec(st);
+  if (!codec) return;
+  const btf::Codec& c = *codec;
   std::mt19937_64 rng(3);
   std::uniform_real_distribution<double> u(0, 1);
   float out[3];
