@@ -148,12 +148,18 @@ TEST(Pca, WarmStartFromAPreviousFitLosesLittle) {
   ASSERT_EQ(warm.components(), 8);
   // The reconstruction's squared error ||X - mean - scores basis||^2 in double (residual_energy
   // subtracts the captured energy, 1e4 times the residual here, so float rounding of the basis
-  // moves it by ~1e-3 relative). From the previous basis (and 10 Gaussian columns), one subspace
-  // iteration: measured 2.4e-8 above the Gram's (the optimum up to rounding, so at rounding
-  // level); bounded at 1e-5 (400x margin, 100x below the cold randomized path's bound above).
+  // moves it by ~1e-3 relative). From the previous basis and warm_oversampling (4) Gaussian
+  // columns, one subspace iteration: measured 3.1e-8 above the Gram's (the optimum up to
+  // rounding, so at rounding level); bounded at 1e-5 (300x margin, 100x below the cold randomized
+  // path's bound above). With 10 columns (the default until 2026-12-03) 2.4e-8: the 4 columns
+  // lose 7e-9 against them, bounded at 1e-6.
   const double excess = ReconstructionError(X, warm) / ReconstructionError(X, gram) - 1;
   EXPECT_GT(excess, -1e-6);
   EXPECT_LT(excess, 1e-5);
+  PcaRequest ten = lpca;
+  ten.warm_oversampling = 10;
+  const double excess10 = ReconstructionError(X, Pca(X, ten, &before.basis)) / ReconstructionError(X, gram) - 1;
+  EXPECT_LT(excess - excess10, 1e-6);
   // Orthonormal to float precision.
   const Eigen::MatrixXf g = warm.basis * warm.basis.transpose();
   EXPECT_LT((g - Eigen::MatrixXf::Identity(8, 8)).cwiseAbs().maxCoeff(), 1e-5);
@@ -239,6 +245,33 @@ TEST(Pca, RandomizedPathCentresExactlyWhenTheFirstBlockIsUnrepresentative) {
   EXPECT_NEAR(rnd.residual_energy, ReconstructionError(X, rnd), 1e-3 * rnd.residual_energy);
   const Eigen::MatrixXf g = rnd.basis * rnd.basis.transpose();
   EXPECT_LT((g - Eigen::MatrixXf::Identity(8, 8)).cwiseAbs().maxCoeff(), 1e-5);
+}
+
+TEST(Pca, MomentsAreTheRowSumsInDouble) {
+  // The mean and total energy of both paths against plain long-double sums: 13 x 1003 (Gram) and
+  // 300 x 1003 (randomized: three blocks), so the rows are not a whole number of AddMoments' runs
+  // of 8 and the columns not of its 4 lanes. The Gram path's mean is the row-order double sum
+  // divided by n, rounded to float: equal to the float of the plain mean but for a double
+  // rounding at a tie (bounded at 1 float ulp). Total energy: measured 2.4e-15 relative on the
+  // Gram path (double sums of float squares), bounded at 1e-13; 6.9e-11 on the randomized path
+  // (from the sums of the rows shifted by the first block's mean), bounded at 1e-8 as in the test
+  // above.
+  for (const Eigen::Index n : {13, 300}) {
+    RowMatrixXf X = ClusterShaped(n, 5).leftCols(1003);
+    X.array() += 2.0f;
+    PcaRequest q;
+    q.max_components = 4;
+    const PcaResult r = Pca(X, q);
+    EXPECT_EQ(r.randomized, n == 300);
+    long double total = 0;
+    for (Eigen::Index j = 0; j < X.cols(); ++j) {
+      long double sum = 0;
+      for (Eigen::Index i = 0; i < n; ++i) sum += X(i, j), total += (long double)X(i, j) * X(i, j);
+      const float mean = static_cast<float>(sum / n);
+      EXPECT_NEAR(r.mean[j], mean, (n == 13 ? 1.0f : 8.0f) * std::abs(mean) * std::numeric_limits<float>::epsilon()) << j;
+    }
+    EXPECT_NEAR(r.total_energy, double(total), (n == 13 ? 1e-13 : 1e-8) * double(total)) << n;
+  }
 }
 
 TEST(Pca, ConstantDataHasNoComponents) {
