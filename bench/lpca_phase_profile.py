@@ -17,21 +17,15 @@ virtual machine (first touches of guest memory).
 import collections
 import json
 import re
-import subprocess
 import sys
+
+from perf_samples import perf_samples
 
 data, summary, freq = sys.argv[1], sys.argv[2], float(sys.argv[3])
 top = int(sys.argv[4]) if len(sys.argv) > 4 else 8
 seconds = json.load(open(summary))["seconds"]
 phases = [p for p in ("read", "kmeans", "sample_rounds", "first_fit", "iterate", "evaluate") if p in seconds]
-out = subprocess.run(["perf", "script", "-i", data, "-F", "tid,time,ip,sym,dso"], capture_output=True, text=True,
-                     check=True).stdout
-rows = []
-for line in out.splitlines():
-    m = re.match(r"\s*\d+\s+([\d.]+):\s+[0-9a-f]+\s+(.*?)\s+\((.*)\)\s*$", line)
-    if m:
-        rows.append((float(m.group(1)), m.group(2), m.group(3)))
-rows.sort()
+rows = perf_samples(data)
 start = next(t for t, s, _ in rows if re.search(r"ReadRows|ReadRawChunks", s))
 bounds = [start]
 for p in phases:

@@ -13,17 +13,12 @@ virtual machine (first touches of guest memory), so compare the user-space group
 """
 import collections
 import re
-import subprocess
 import sys
 
+from perf_samples import perf_samples
+
 data, freq = sys.argv[1], float(sys.argv[2])
-out = subprocess.run(["perf", "script", "-i", data, "-F", "tid,time,ip,sym,dso"], capture_output=True, text=True,
-                     check=True).stdout
-rows = []
-for line in out.splitlines():
-    m = re.match(r"\s*(\d+)\s+([\d.]+):\s+[0-9a-f]+\s+(.*)$", line)
-    if m:
-        rows.append((float(m.group(2)), m.group(3)))
+rows = [(t, f"{sym} ({dso})") for t, sym, dso in perf_samples(data)]
 start = next(t for t, s in rows if re.search(r"ReadRows|ReadRawChunks|Fletcher32|ToHalves", s))
 end = next(t for t, s in rows if t > start and re.search(r"SeedCenters|NearestCenters|UpdateMeans", s))
 groups = collections.OrderedDict([
