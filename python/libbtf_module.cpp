@@ -15,6 +15,7 @@
 
 #include "libbtf/compress/codec.h"
 #include "libbtf/compress/codec_source.h"
+#include "libbtf/core/eigen_setup.h"
 #include "libbtf/core/error.h"
 #include "libbtf/core/version.h"
 #include "libbtf/eval/metrics.h"
@@ -390,6 +391,7 @@ PYBIND11_MODULE(libbtf, m) {
   m.doc() = "libbtf: BTF datasets, codecs and Bonn .btf files as NumPy arrays (docs/python.md)";
   m.attr("__version__") = btf::Version();
   btf::h5::SilenceErrors();
+  btf::FixEigenBlocking();
 
   // libbtf.Error(message): .exit_code (docs/errors.md), .category ("usage", "bad_input", "io", ...).
   static py::exception<btf::Error> error(m, "Error", PyExc_RuntimeError);

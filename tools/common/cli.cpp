@@ -13,6 +13,7 @@
 
 #include "libbtf/core/atomic_file.h"
 #include "libbtf/core/distributed.h"
+#include "libbtf/core/eigen_setup.h"
 #include "libbtf/core/error.h"
 #include "libbtf/io/hdf5.h"
 #include "libbtf/core/version.h"
@@ -20,6 +21,7 @@
 namespace btf::cli {
 
 void Configure(CLI::App& app) {
+  FixEigenBlocking();
   app.set_version_flag("--version", fmt::format("{} {}", app.get_name(), Version()),
                        "Print the libbtf version and exit");
   app.option_defaults()->always_capture_default();
