@@ -11,6 +11,7 @@
 #include <Eigen/Core>
 #include <Eigen/SVD>
 #include <chrono>
+#include <cstring>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -22,9 +23,13 @@
 #include <sstream>
 
 #include <omp.h>
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
 #include <unistd.h>
 
 #include "libbtf/compress/codec.h"
+#include "libbtf/compress/gram_kernel.h"
 #include "libbtf/compress/lpca_reassign.h"
 #include "libbtf/compress/pca.h"
 #include "libbtf/core/eigen_setup.h"
@@ -85,6 +90,108 @@ void BM_EigenGemm(benchmark::State& st) {
 BENCHMARK_TEMPLATE(BM_EigenGemm, float)->Unit(benchmark::kMillisecond)->MinTime(2.0)->UseRealTime();
 BENCHMARK_TEMPLATE(BM_EigenGemm, double)->Unit(benchmark::kMillisecond)->MinTime(2.0)->UseRealTime();
 
+// The machine's double FMA peak on one core with the widest instruction set the per-view PCA
+// kernels use (gram_kernel.h: AVX-512 where the CPU has it, else AVX2): independent FMA chains,
+// no loads (24 x 8 or 12 x 4 doubles per step; the AVX2 loop takes twice the steps). Eigen's GEMM above is built for x86-64-v3 (AVX2), so on an AVX-512 CPU this peak, not
+// the GEMM rate, is the yardstick for those kernels.
+double& FmaPeakPerCore() {
+  static double rate = 0;
+  return rate;
+}
+
+#if defined(__x86_64__)
+// 24 independent chains x = a x + b of `iters` FMAs each; returns one value so nothing is dropped.
+__attribute__((target("avx512f"))) double Chains512(long iters) {
+  const __m512d a = _mm512_set1_pd(1.0000001), b = _mm512_set1_pd(0.9999999);
+  __m512d x[24];
+  for (auto& v : x) v = _mm512_set1_pd(0.5);
+  for (long it = 0; it < iters; ++it)
+#pragma GCC unroll 24
+    for (int k = 0; k < 24; ++k) x[k] = _mm512_fmadd_pd(a, x[k], b);
+  for (int k = 1; k < 24; ++k) x[0] = _mm512_add_pd(x[0], x[k]);
+  return _mm512_reduce_add_pd(x[0]);
+}
+__attribute__((target("avx2,fma"))) double Chains256(long iters) {
+  const __m256d a = _mm256_set1_pd(1.0000001), b = _mm256_set1_pd(0.9999999);
+  __m256d x[12];  // 16 registers: 12 chains (the FMA latency of 4 cycles x 2 ports needs 8)
+  for (auto& v : x) v = _mm256_set1_pd(0.5);
+  for (long it = 0; it < 2 * iters; ++it)
+#pragma GCC unroll 12
+    for (int k = 0; k < 12; ++k) x[k] = _mm256_fmadd_pd(a, x[k], b);
+  for (int k = 1; k < 12; ++k) x[0] = _mm256_add_pd(x[0], x[k]);
+  double out[4];
+  _mm256_storeu_pd(out, x[0]);
+  return out[0] + out[1] + out[2] + out[3];
+}
+#endif
+
+void BM_FmaPeak(benchmark::State& st) {
+#if defined(__x86_64__)
+  const btf::KernelIsa isa = btf::BestKernelIsa();
+  const int lanes = isa == btf::KernelIsa::kAvx512 ? 8 : 4;
+  if (isa == btf::KernelIsa::kGeneric) {
+    st.SkipWithError("no AVX2/AVX-512 on this CPU");
+    return;
+  }
+  const long iters = 1 << 22;
+  double secs = 0, sink = 0;
+  int reps = 0;
+  for (auto _ : st) {
+    const auto t0 = std::chrono::steady_clock::now();
+    sink += lanes == 8 ? Chains512(iters) : Chains256(iters);
+    secs += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    ++reps;
+  }
+  benchmark::DoNotOptimize(sink);
+  const double fmas = lanes == 8 ? 24.0 * 8 * double(iters) : 12.0 * 4 * 2 * double(iters);  // per call
+  FmaPeakPerCore() = 2.0 * fmas * reps / secs / 1e9;
+  st.SetLabel(btf::KernelIsaName(isa));
+  st.counters["GFLOPs_per_core"] = FmaPeakPerCore();
+#else
+  st.SkipWithError("x86-64 only");
+#endif
+}
+BENCHMARK(BM_FmaPeak)->Unit(benchmark::kMillisecond)->MinTime(1.0)->UseRealTime();
+
+// Per-view PCA's Gram kernel (LaneGram, gram_kernel.h) on one thread: an 81-row tile of 256
+// columns (L2-resident, as WidePca hands it) added 768 times (one Bonn-size slot), against the
+// straightforward Eigen rank update of the lower triangle that WidePca used before. Arg: 0 the
+// straightforward one, 1 LaneGram. Flops: n^2 w per tile (the lower triangle's multiply-adds x 2).
+double g_eigen_gram_seconds = 0;
+void BM_PcaViewGram(benchmark::State& st) {
+  using RowMatrixXd = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  const Eigen::Index n = 81, w = btf::kWideTile, tiles = 768;
+  const RowMatrixXd T = RowMatrixXd::Random(n, w);
+  const int before = omp_get_max_threads();
+  omp_set_num_threads(1);
+  double secs = 0, sink = 0;
+  int reps = 0;
+  for (auto _ : st) {
+    const auto t0 = std::chrono::steady_clock::now();
+    if (st.range(0) == 0) {
+      Eigen::MatrixXd G = Eigen::MatrixXd::Zero(n, n);
+      for (Eigen::Index t = 0; t < tiles; ++t) G.selfadjointView<Eigen::Lower>().rankUpdate(T);
+      sink += G(n - 1, 0);
+    } else {
+      btf::LaneGram g(n);
+      for (Eigen::Index t = 0; t < tiles; ++t) g.Add(T.data(), w, w);
+      sink += g.Reduce()(n - 1, 0);
+    }
+    secs += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    ++reps;
+  }
+  omp_set_num_threads(before);
+  benchmark::DoNotOptimize(sink);
+  const double gflops = double(n) * n * w * tiles * reps / secs / 1e9;
+  st.SetLabel(st.range(0) == 0 ? "Eigen rankUpdate (before)" : std::string("LaneGram ") + btf::KernelIsaName(btf::BestKernelIsa()));
+  st.counters["GFLOPs"] = gflops;
+  if (GemmRate(true) > 0) st.counters["fraction_of_double_gemm_per_core"] = 2 * gflops / GemmRate(true);
+  if (FmaPeakPerCore() > 0) st.counters["fraction_of_fma_peak"] = gflops / FmaPeakPerCore();
+  if (st.range(0) == 0) g_eigen_gram_seconds = secs / reps;
+  else if (g_eigen_gram_seconds > 0) st.counters["eigen_s_over_lanegram_s"] = g_eigen_gram_seconds / (secs / reps);
+}
+BENCHMARK(BM_PcaViewGram)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->MinTime(1.0)->UseRealTime();
+
 std::unique_ptr<btf::Codec>& PcaCodec() {
   static std::unique_ptr<btf::Codec> c;
   return c;
@@ -119,6 +226,7 @@ void BM_PcaView(benchmark::State& st) {
   st.counters["decompose_s"] = decompose;
   st.counters["kernel_GFLOPs"] = flops / decompose / 1e9;
   if (GemmRate(true) > 0) st.counters["fraction_of_double_gemm"] = flops / decompose / 1e9 / GemmRate(true);
+  if (FmaPeakPerCore() > 0) st.counters["fraction_of_fma_peak"] = flops / decompose / 1e9 / (2 * FmaPeakPerCore());
   st.counters["relative_error"] = s.relative_error;
   st.counters["codec_MB"] = double(s.codec_bytes) / 1e6;
   st.counters["ratio_vs_float32"] = s.ratio_float32;
@@ -168,6 +276,7 @@ void BM_PcaViewSlotKernel(benchmark::State& st) {
   st.counters["GFLOPs"] = flops * reps / secs / 1e9;
   // One thread against the 2-thread GEMM rate: x 2 gives the fraction of one core's rate.
   if (GemmRate(true) > 0) st.counters["fraction_of_double_gemm_per_core"] = 2 * flops * reps / secs / 1e9 / GemmRate(true);
+  if (FmaPeakPerCore() > 0) st.counters["fraction_of_fma_peak"] = flops * reps / secs / 1e9 / FmaPeakPerCore();
   if (st.range(0) == 0) g_wide_slot_seconds = secs / reps;
   else if (g_wide_slot_seconds > 0) st.counters["generic_s_over_wide_s"] = secs / reps / g_wide_slot_seconds;
 }

@@ -180,14 +180,14 @@ PcaRequest MakeRequest(const CompressOptions& o, std::uint64_t seed_offset) {
 // Decomposes one view slot into `slot` (WidePca: two tiled passes over the slot, no copy of it
 // unless the log transform needs one); returns the errors of its reconstruction, measured on the
 // tiles as WidePca reconstructs them.
-ErrorStats CompressViewSlot(const SlotSource& in, int v, const std::vector<float>& raw, const CompressOptions& o,
+ErrorStats CompressViewSlot(const SlotSource& in, int v, const float* raw, const CompressOptions& o,
                             const Transform& tr, PcaViewSlot& slot, int* dropped) {
   const int L = in.lights().size();
   const std::size_t D = in.image_size(), n = in.slot_size();
   std::vector<float> transformed;
   if (tr.log) {  // the log's domain check would misname a NaN: check finiteness first
-    CheckFiniteSlot(in, v, raw.data());
-    transformed = raw;
+    CheckFiniteSlot(in, v, raw);
+    transformed.assign(raw, raw + n);
     tr.Apply(in, v, transformed.data(), n);
   }
   ErrorStats e;
@@ -200,12 +200,12 @@ ErrorStats CompressViewSlot(const SlotSource& in, int v, const std::vector<float
         for (Eigen::Index j = 0; j < rec.cols(); ++j) row[static_cast<std::size_t>(j)] = tr.Invert(x[j]);
         x = row.data();
       }
-      e.Add(raw.data() + std::size_t(l) * D + std::size_t(c0), x, static_cast<std::size_t>(rec.cols()));
+      e.Add(raw + std::size_t(l) * D + std::size_t(c0), x, static_cast<std::size_t>(rec.cols()));
     }
   };
-  WidePcaResult r = WidePca(tr.log ? transformed.data() : raw.data(), L, static_cast<Eigen::Index>(D),
+  WidePcaResult r = WidePca(tr.log ? transformed.data() : raw, L, static_cast<Eigen::Index>(D),
                             MakeRequest(o, std::uint64_t(v)), o.storage == CodecStorage::kHalf, sink);
-  if (r.non_finite >= 0) CheckFiniteSlot(in, v, raw.data());  // throws, naming the item
+  if (r.non_finite >= 0) CheckFiniteSlot(in, v, raw);  // throws, naming the item
   BTF_CHECK(r.non_finite < 0);
   *dropped = r.dropped_null;
   slot.components = r.components;
@@ -268,8 +268,9 @@ void CompressPcaView(const SlotSource& in, const CompressOptions& o, const Trans
   // when the cores are shared), taken in turn from a shared counter; each thread reads its slot
   // itself, one thread at a time (HDF5 is never called concurrently), so one thread reads and
   // inflates while the other decomposes, on the same cores and without a reader thread of its
-  // own. A slot's result does not depend on the thread that computes it. The first thread (the
-  // caller's) reports progress after each of its slots.
+  // own; a source that holds its slots in memory is read where it is (no copy). A slot's result
+  // does not depend on the thread that computes it. The first thread (the caller's) reports
+  // progress after each of its slots.
   const int P = std::max(1, std::min(omp_get_max_threads(), M));
   std::mutex reading;
   std::atomic<int> next{0}, done{0};
@@ -279,13 +280,16 @@ void CompressPcaView(const SlotSource& in, const CompressOptions& o, const Trans
 #pragma omp parallel num_threads(P)
   {
     omp_set_num_threads(1);  // Eigen and the reader's inflate sequential in this thread
-    std::vector<float> raw(n);
+    std::vector<float> buffer;
     for (int i = next++; i < M && !stop; i = next++) {
       const int v = mine[static_cast<std::size_t>(i)];
       try {
-        {
+        const float* raw = in.ViewSlotData(v);
+        if (!raw) {
+          buffer.resize(n);
           const std::lock_guard<std::mutex> lock(reading);
-          in.ReadViewSlot(v, raw.data());
+          in.ReadViewSlot(v, buffer.data());
+          raw = buffer.data();
         }
         const std::size_t u = static_cast<std::size_t>(v);
         slot_err[u] = CompressViewSlot(in, v, raw, o, tr, slots[u], &slot_dropped[u]);

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <random>
 
+#include "libbtf/compress/gram_kernel.h"
 #include "libbtf/io/half.h"
 
 #include <Eigen/Eigenvalues>
@@ -358,14 +359,16 @@ void NormalizeSigns(float* basis, Eigen::Index c, Eigen::Index d, float* weights
 }
 
 WidePcaResult WidePca(const float* X, Eigen::Index n, Eigen::Index d, const PcaRequest& q, bool half,
-                      const TileSink& sink) {
+                      const TileSink& sink, KernelIsa isa) {
   // Tiles are row-major (n x w) like X, so loading and centring one reads X's rows contiguously
-  // (vectorised); the Gram's rank update and the basis product take either storage order.
+  // (vectorised), and the kernels (gram_kernel.h) take rows of them; a tile's width is padded
+  // with zero columns to a multiple of 8, which change no sum.
   using TileD = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
   WidePcaResult r;
   r.mean.resize(static_cast<std::size_t>(d));
-  MatrixXd G = MatrixXd::Zero(n, n);
-  TileD T(n, kWideTile);
+  LaneGram gram(n, isa);
+  TileD T = TileD::Zero(n, kWideTile);
+  auto padded = [](Eigen::Index w) { return (w + 7) / 8 * 8; };
   std::vector<double> colsum(static_cast<std::size_t>(kWideTile)), colsq(static_cast<std::size_t>(kWideTile));
   // Loads columns [c0, c0 + w) centred by the stored (float) mean into T; with `sq`, adds each
   // column's centred sum of squares to sq[j] (per column: no serial chain across the tile).
@@ -375,6 +378,7 @@ WidePcaResult WidePca(const float* X, Eigen::Index n, Eigen::Index d, const PcaR
       const float* row = X + i * d + c0;
       double* t = T.row(i).data();
       for (Eigen::Index j = 0; j < w; ++j) t[j] = double(row[j]) - double(m[j]);
+      std::fill(t + w, t + padded(w), 0.0);
       if (sq)
         for (Eigen::Index j = 0; j < w; ++j) sq[j] += t[j] * t[j];
     }
@@ -414,7 +418,7 @@ WidePcaResult WidePca(const float* X, Eigen::Index n, Eigen::Index d, const PcaR
     std::fill(colsq.begin(), colsq.end(), 0.0);
     load_centred(c0, w, colsq.data());
     for (Eigen::Index j = 0; j < w; ++j) centred += colsq[static_cast<std::size_t>(j)];
-    G.selfadjointView<Eigen::Lower>().rankUpdate(T.leftCols(w));
+    gram.Add(T.data(), kWideTile, padded(w));
   }
   r.total_energy = total;
   r.centered_energy = centred;
@@ -424,7 +428,7 @@ WidePcaResult WidePca(const float* X, Eigen::Index n, Eigen::Index d, const PcaR
   int c = 0;
   MatrixXd U;
   if (std::min(q.max_components, limit) > 0 && centred > 0) {
-    Eigen::SelfAdjointEigenSolver<MatrixXd> es(G.selfadjointView<Eigen::Lower>());
+    Eigen::SelfAdjointEigenSolver<MatrixXd> es(gram.Reduce());
     U = es.eigenvectors().rowwise().reverse();
     for (Eigen::Index k = n - 1; k >= 0; --k) r.eigenvalues.push_back(std::max(0.0, es.eigenvalues()[k]));
     c = ChooseComponents(r.eigenvalues, q, total, centred, limit, &r.dropped_null);
@@ -435,7 +439,7 @@ WidePcaResult WidePca(const float* X, Eigen::Index n, Eigen::Index d, const PcaR
   for (double e : r.eigenvalues) captured += e;
   r.residual_energy = std::max(0.0, centred - captured);
   // Weights U Lambda^(1/2); S = Lambda^(-1/2) U^T maps a centred tile to basis rows.
-  MatrixXd S(c, n);
+  TileD S(c, n);
   RowMatrixXf W(n, c);
   for (int k = 0; k < c; ++k) {
     const double s = std::sqrt(r.eigenvalues[static_cast<std::size_t>(k)]);
@@ -448,14 +452,14 @@ WidePcaResult WidePca(const float* X, Eigen::Index n, Eigen::Index d, const PcaR
   r.basis.resize(static_cast<std::size_t>(c) * static_cast<std::size_t>(d));
   // Pass 2: basis rows and (for the sink) the reconstruction, tile by tile.
   const Eigen::Map<const Eigen::RowVectorXf> mean(r.mean.data(), d);
-  MatrixXd Bd(c, kWideTile);
+  TileD Bd(c, kWideTile);
   RowMatrixXf Bf(c, kWideTile), R(n, kWideTile);
   Eigen::Map<RowMatrixXf> basis(r.basis.data(), c, d);
   for (Eigen::Index c0 = 0; c0 < d && (c > 0 || sink); c0 += kWideTile) {
     const Eigen::Index w = std::min(kWideTile, d - c0);
     if (c > 0) {
       load_centred(c0, w, nullptr);
-      Bd.leftCols(w).noalias() = S * T.leftCols(w);
+      BasisProduct(S.data(), c, n, T.data(), kWideTile, padded(w), Bd.data(), kWideTile, gram.isa());
       Bf.leftCols(w) = Bd.leftCols(w).cast<float>();
       if (half) Bf.leftCols(w) = Bf.leftCols(w).unaryExpr([](float x) { return RoundToHalf(x); });
       basis.middleCols(c0, w) = Bf.leftCols(w);

@@ -8,6 +8,8 @@
 
 #include <Eigen/Core>
 
+#include "libbtf/compress/gram_kernel.h"
+
 namespace btf {
 
 using RowMatrixXf = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
@@ -82,14 +84,15 @@ PcaResult PcaFullSvd(const Eigen::Ref<const RowMatrixXf>& X, int components);
 // Per-view PCA's shape: few observations (n, the lights) of many variables (d, the texel values),
 // X row-major n x d with row stride d, decomposed in column tiles of kWideTile without a copy:
 //   pass 1, per tile: finiteness check, column means (double; the float-rounded mean is the one
-//     stored and used to centre), centring in double, Gram G += Tc Tc^T (double);
+//     stored and used to centre), centring in double, Gram G += Tc Tc^T (double, LaneGram: its
+//     summation order is fixed by the column index alone);
 //   eigenpairs (lambda_k, u_k) of G, components chosen as in Pca;
-//   pass 2, per tile: basis rows b_k = u_k^T Tc / sqrt(lambda_k) in double, rounded to float (or
+//   pass 2, per tile: basis rows b_k = u_k^T Tc / sqrt(lambda_k) in double (BasisProduct), rounded to float (or
 //     half-representable floats), weights U Lambda^(1/2) (= the projections Xc b_k^T in exact
 //     arithmetic), and, if `sink` is set, the tile's reconstruction handed to it (for errors).
 // Signs: each basis row's largest-magnitude entry (first in index order on ties) is positive,
-// its weight column flipped with it. The tiles' order is fixed, so results do not depend on
-// threads. request.gram_limit, oversampling and power_iterations are not used (always the Gram).
+// its weight column flipped with it. Results depend neither on the thread nor on the kernels'
+// instruction set. request.gram_limit, oversampling and power_iterations are not used (always the Gram).
 inline constexpr Eigen::Index kWideTile = 256;
 
 struct WidePcaResult {
@@ -109,8 +112,9 @@ using TileSink = std::function<void(Eigen::Index col0, const Eigen::Ref<const Ro
 
 // half: mean, basis and weights rounded to IEEE half (stored as floats), before the
 // reconstruction the sink sees.
+// isa: the double kernels' instruction set (gram_kernel.h; every choice gives the same bits).
 WidePcaResult WidePca(const float* X, Eigen::Index n, Eigen::Index d, const PcaRequest& request, bool half = false,
-                      const TileSink& sink = {});
+                      const TileSink& sink = {}, KernelIsa isa = KernelIsa::kAuto);
 
 // Flips the sign of basis row k (and of its scores/weights column k) so that the row's
 // largest-magnitude entry, the first one on ties, is positive.
