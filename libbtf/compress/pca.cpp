@@ -461,7 +461,8 @@ WidePcaResult WidePca(const float* X, Eigen::Index n, Eigen::Index d, const PcaR
       load_centred(c0, w, nullptr);
       BasisProduct(S.data(), c, n, T.data(), kWideTile, padded(w), Bd.data(), kWideTile, gram.isa());
       Bf.leftCols(w) = Bd.leftCols(w).cast<float>();
-      if (half) Bf.leftCols(w) = Bf.leftCols(w).unaryExpr([](float x) { return RoundToHalf(x); });
+      if (half)
+        for (int k = 0; k < c; ++k) RoundToHalves(Bf.row(k).data(), static_cast<std::size_t>(w));
       basis.middleCols(c0, w) = Bf.leftCols(w);
     }
     if (!sink) continue;

@@ -91,6 +91,9 @@ TEST(Half, BulkConversionsEqualTheScalarOnes) {
     std::vector<std::uint16_t> out(n);
     FloatsToHalves(probes.data(), out.data(), n);
     for (std::size_t i = 0; i < n; ++i) ASSERT_EQ(out[i], FloatToHalf(probes[i])) << probes[i];
+    std::vector<float> rounded(probes.begin(), probes.begin() + std::ptrdiff_t(n));
+    RoundToHalves(rounded.data(), n);
+    for (std::size_t i = 0; i < n; ++i) ASSERT_EQ(rounded[i], HalfToFloat(FloatToHalf(probes[i]))) << probes[i];
   }
 }
 
