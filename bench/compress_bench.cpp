@@ -32,7 +32,6 @@
 #include "libbtf/compress/gram_kernel.h"
 #include "libbtf/compress/lpca_reassign.h"
 #include "libbtf/compress/pca.h"
-#include "libbtf/core/eigen_setup.h"
 #include "libbtf/io/dataset_io.h"
 #include "libbtf/io/half.h"
 #include "bench/synthetic_btf.h"
@@ -676,12 +675,4 @@ const bool g_codec_files_registered = [] {
 
 }  // namespace
 
-// BENCHMARK_MAIN, with Eigen's blocking fixed as in every libbtf program (libbtf/core/eigen_setup.h).
-int main(int argc, char** argv) {
-  btf::FixEigenBlocking();
-  benchmark::Initialize(&argc, argv);
-  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
-  benchmark::RunSpecifiedBenchmarks();
-  benchmark::Shutdown();
-  return 0;
-}
+#include "bench/bench_main.h"

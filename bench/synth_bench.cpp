@@ -9,7 +9,6 @@
 #include <benchmark/benchmark.h>
 #include <omp.h>
 
-#include "libbtf/core/eigen_setup.h"
 #include "libbtf/synth/btf_generator.h"
 #include "libbtf/synth/irawan2006.h"
 #include "libbtf/synth/photo_synth.h"
@@ -96,12 +95,4 @@ BENCHMARK(BM_Photo1280x960)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTi
 
 }  // namespace
 
-// BENCHMARK_MAIN, with Eigen's blocking fixed as in every libbtf program (libbtf/core/eigen_setup.h).
-int main(int argc, char** argv) {
-  btf::FixEigenBlocking();
-  benchmark::Initialize(&argc, argv);
-  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
-  benchmark::RunSpecifiedBenchmarks();
-  benchmark::Shutdown();
-  return 0;
-}
+#include "bench/bench_main.h"

@@ -140,33 +140,24 @@ __attribute__((target("avx2,fma"))) void BasisBlockAvx2(const double* S, Index n
     for (int v = 0; v < vecs; ++v) _mm256_storeu_pd(B + r * ldb + k0 + 4 * v, acc[r][v]);
 }
 
-// Runs Block<RB> over column chunks of `vec` values per vector (8 or 4), 3 vectors per chunk, for
-// rows [r0, r0 + rb) with rb <= RBMax, dispatching rb to a compile-time block height.
-template <int RBMax, template <int> class Block>
-void BasisRows(const double* S, Index c, Index n, const double* T, Index ld, Index w, double* B, Index ldb, int vec) {
-  for (Index r0 = 0; r0 < c; r0 += RBMax) {
-    const int rb = static_cast<int>(std::min<Index>(RBMax, c - r0));
-    for (Index k0 = 0; k0 < w; k0 += 3 * vec) {
-      const int vecs = static_cast<int>(std::min<Index>(3, (w - k0) / vec));
-      Block<RBMax>::Run(rb, S + r0 * n, n, T, ld, k0, vecs, B + r0 * ldb, ldb);
-    }
+// One block of rb basis rows (1 <= rb <= the kernel's block height) over `vecs` vectors of columns.
+using BasisBlock = void (*)(const double* S, Index n, const double* T, Index ld, Index k0, int vecs, double* B,
+                            Index ldb);
+constexpr BasisBlock kAvx512Blocks[] = {BasisBlockAvx512<1>, BasisBlockAvx512<2>, BasisBlockAvx512<3>,
+                                        BasisBlockAvx512<4>, BasisBlockAvx512<5>, BasisBlockAvx512<6>,
+                                        BasisBlockAvx512<7>, BasisBlockAvx512<8>};
+constexpr BasisBlock kAvx2Blocks[] = {BasisBlockAvx2<1>, BasisBlockAvx2<2>, BasisBlockAvx2<3>, BasisBlockAvx2<4>};
+
+// Runs blocks[rb - 1] over rows [r0, r0 + rb), rb <= height, and column chunks of 3 vectors of
+// `vec` values (the last chunk shorter).
+void BasisRows(const BasisBlock* blocks, int height, int vec, const double* S, Index c, Index n, const double* T,
+               Index ld, Index w, double* B, Index ldb) {
+  for (Index r0 = 0; r0 < c; r0 += height) {
+    const int rb = static_cast<int>(std::min<Index>(height, c - r0));
+    for (Index k0 = 0; k0 < w; k0 += 3 * vec)
+      blocks[rb - 1](S + r0 * n, n, T, ld, k0, static_cast<int>(std::min<Index>(3, (w - k0) / vec)), B + r0 * ldb, ldb);
   }
 }
-
-template <int RB>
-struct Avx512Rows {
-  static void Run(int rb, const double* S, Index n, const double* T, Index ld, Index k0, int vecs, double* B, Index ldb) {
-    if (rb == RB) return BasisBlockAvx512<RB>(S, n, T, ld, k0, vecs, B, ldb);
-    if constexpr (RB > 1) Avx512Rows<RB - 1>::Run(rb, S, n, T, ld, k0, vecs, B, ldb);
-  }
-};
-template <int RB>
-struct Avx2Rows {
-  static void Run(int rb, const double* S, Index n, const double* T, Index ld, Index k0, int vecs, double* B, Index ldb) {
-    if (rb == RB) return BasisBlockAvx2<RB>(S, n, T, ld, k0, vecs, B, ldb);
-    if constexpr (RB > 1) Avx2Rows<RB - 1>::Run(rb, S, n, T, ld, k0, vecs, B, ldb);
-  }
-};
 
 #endif  // BTF_KERNEL_X86
 
@@ -244,8 +235,8 @@ void BasisProduct(const double* S, Index c, Index n, const double* T, Index ld, 
   BTF_CHECK(w % kLanes == 0);
   switch (Resolve(isa)) {
 #ifdef BTF_KERNEL_X86
-    case KernelIsa::kAvx512: return BasisRows<8, Avx512Rows>(S, c, n, T, ld, w, B, ldb, 8);
-    case KernelIsa::kAvx2: return BasisRows<4, Avx2Rows>(S, c, n, T, ld, w, B, ldb, 4);
+    case KernelIsa::kAvx512: return BasisRows(kAvx512Blocks, 8, 8, S, c, n, T, ld, w, B, ldb);
+    case KernelIsa::kAvx2: return BasisRows(kAvx2Blocks, 4, 4, S, c, n, T, ld, w, B, ldb);
 #endif
     default: return BasisGeneric(S, c, n, T, ld, w, B, ldb);
   }

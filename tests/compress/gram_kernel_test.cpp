@@ -61,8 +61,9 @@ TEST(LaneGram, EveryInstructionSetAndTileWidthGivesTheDocumentedBits) {
 }
 
 TEST(LaneGram, IsTheGramMatrixToDoubleRounding) {
-  // Against long-double sums: relative to sum |T_ik T_jk|, the bound of a length-296 chain of
-  // FMAs is 296 * 2^-53 = 3.3e-14; 1e-14 is what 8 lanes of 37 terms give (measured below 2e-16).
+  // Against long-double sums, relative to sum |T_ik T_jk|: 8 lanes of 37 FMAs each, then 3 levels
+  // of additions, round at most 40 times, so the error is below 40 * 2^-53 = 4.4e-15 of it; 1e-14
+  // leaves room for the long double's own rounding.
   const RowMatrixXd T = Random(13, 8 * 37, 5, 1.0);
   LaneGram g(13);
   g.Add(T.data(), T.cols(), T.cols());
