@@ -108,7 +108,9 @@ __attribute__((target("avx512f"))) double Chains512(long iters) {
 #pragma GCC unroll 24
     for (int k = 0; k < 24; ++k) x[k] = _mm512_fmadd_pd(a, x[k], b);
   for (int k = 1; k < 24; ++k) x[0] = _mm512_add_pd(x[0], x[k]);
-  return _mm512_reduce_add_pd(x[0]);
+  alignas(64) double lanes[8];  // not _mm512_reduce_add_pd: GCC 12 warns inside it (-Wuninitialized)
+  _mm512_store_pd(lanes, x[0]);
+  return lanes[0] + lanes[1] + lanes[2] + lanes[3] + lanes[4] + lanes[5] + lanes[6] + lanes[7];
 }
 __attribute__((target("avx2,fma"))) double Chains256(long iters) {
   const __m256d a = _mm256_set1_pd(1.0000001), b = _mm256_set1_pd(0.9999999);

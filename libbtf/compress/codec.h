@@ -280,6 +280,14 @@ class CodecBuilder {
 CompressSummary Compress(const CompressOptions& options, const SlotSource& input, Codec* codec,
                          const Reporter& reporter = {});
 
+// Compress, then the codec file written into `out` and committed (nullptr: nothing written, e.g.
+// on the MPI ranks other than 0): the same file as Compress + WriteCodec. pca-view in one process
+// writes each view slot as soon as it and the slots before it are done, so the write overlaps the
+// decomposition and the codec is never all in memory (at Bonn size 1 GiB of float coefficients).
+// On failure nothing is committed.
+CompressSummary CompressToFile(const CompressOptions& options, const SlotSource& input, AtomicOutput* out,
+                               const std::string& creator, const Reporter& reporter = {});
+
 // Codec files ("libbtf-codec" 1.2.0, docs/format.md). Written atomically.
 void WriteCodec(const std::filesystem::path& path, const Codec& codec, const std::string& creator = "libbtf");
 // Writes into `out`'s temporary and commits it (for callers that reserved the output early).

@@ -3,6 +3,7 @@
 #include <sstream>
 
 #include "libbtf/compress/codec.h"
+#include "libbtf/compress/codec_writer.h"
 #include "libbtf/core/atomic_file.h"
 #include "libbtf/core/error.h"
 #include "libbtf/io/dataset_io.h"
@@ -54,64 +55,80 @@ void WriteCodec(const std::filesystem::path& path, const Codec& c, const std::st
 }
 
 void WriteCodec(AtomicOutput& out, const Codec& c, const std::string& creator) {
-  {
-    h5::File f = h5::File::Create(out.temp_path());
-    f.WriteFormatHeader(kCodecFormat, kCodecFormatVersion, creator);
-    f.WriteString("/provenance", c.info().provenance.dump());
-    f.CreateGroup("/codec");
-    f.SetAttr("/codec", "method", MethodName(c.method()));
-    f.SetAttr("/codec", "color_space", c.info().color_space);
-    f.SetAttr("/codec", "units", c.info().units);
-    f.SetAttr("/codec", "cos_theta_i_included", std::int64_t(c.info().cos_theta_i_included ? 1 : 0));
-    f.SetAttr("/codec", "channel_names", Join(c.info().channel_names));
-    f.SetAttr("/codec", "texel_size_mm", c.info().texel_size_mm);
-    f.SetAttr("/codec", "height", std::int64_t(c.height()));
-    f.SetAttr("/codec", "width", std::int64_t(c.width()));
-    f.SetAttr("/codec", "channels", std::int64_t(c.channels()));
-    f.SetAttr("/codec", "transform", std::string(c.transform() == ValueTransform::kLog ? "log" : "none"));
-    f.SetAttr("/codec", "log_epsilon", c.log_epsilon());
-    const bool half = c.storage() == CodecStorage::kHalf;
-    const h5::Storage st = half ? h5::Storage::kFloat16 : h5::Storage::kFloat32;
-    f.SetAttr("/codec", "storage", std::string(half ? "float16" : "float32"));
-    WriteSamplingTables(f, "/codec/view", c.views());
-    WriteSamplingTables(f, "/codec/light", c.lights());
-    f.WriteString("/codec/compression", c.provenance().dump());
-    const hsize_t V = c.num_views(), L = c.num_lights(), H = c.height(), W = c.width(), C = c.channels();
-    if (c.method() == CodecMethod::kPcaView) {
-      f.CreateGroup("/codec/pca_view");
-      std::vector<std::int32_t> comps;
-      for (const auto& s : c.pca_view()) comps.push_back(s.components);
-      f.WriteInts("/codec/pca_view/components", {V}, comps.data());
-      for (int v = 0; v < c.num_views(); ++v) {
-        const PcaViewSlot& s = c.pca_view()[static_cast<std::size_t>(v)];
-        f.WriteFloats(SlotName("mean", v), {H, W, C}, s.mean.data(), st);
-        if (s.components == 0) continue;
-        const hsize_t k = s.components;
-        f.WriteFloats(SlotName("basis", v), {k, H, W, C}, s.basis.data(), st);
-        f.WriteFloats(SlotName("weights", v), {L, k}, s.weights.data(), st);
-        f.WriteDoubles(SlotName("eigenvalues", v), {k}, s.eigenvalues.data());
-      }
-    } else if (IsFullMatrixFactorisation(c.method())) {
-      WriteFmfModel(f, c.fmf(), c.num_views(), c.height(), c.width());
-    } else if (c.method() == CodecMethod::kLpcaTensor) {
-      WriteLpcaTensorModel(f, c.lpca_tensor(), c.height(), c.width());
-    } else {
-      const LpcaModel& m = c.lpca();
-      const hsize_t K = m.clusters, k = m.components;
-      f.CreateGroup("/codec/lpca");
-      f.SetAttr("/codec/lpca", "clusters", std::int64_t(K));
-      f.SetAttr("/codec/lpca", "components", std::int64_t(k));
-      f.WriteFloats("/codec/lpca/means", {K, V, L, C}, m.means.data(), st);
-      f.WriteInts("/codec/lpca/cluster_components", {K}, m.cluster_components.data());
-      f.WriteInts("/codec/lpca/cluster_index", {H, W}, m.cluster_of.data());
-      if (k > 0) {
-        f.WriteFloats("/codec/lpca/basis", {K, k, V, L, C}, m.basis.data(), st);
-        f.WriteFloats("/codec/lpca/weights", {H, W, k}, m.weights.data(), st);
-      }
-    }
-    f.Close();  // throws if the data did not all reach the file: nothing is committed
+  CodecFileWriter w(out, c, creator);
+  w.Finish(c, 0);
+}
+
+CodecFileWriter::CodecFileWriter(AtomicOutput& out, const Codec& c, const std::string& creator)
+    : out_(out),
+      file_(h5::File::Create(out.temp_path())),
+      storage_(c.storage() == CodecStorage::kHalf ? h5::Storage::kFloat16 : h5::Storage::kFloat32),
+      L_(c.num_lights()),
+      H_(c.height()),
+      W_(c.width()),
+      C_(c.channels()) {
+  h5::File& f = file_;
+  f.WriteFormatHeader(kCodecFormat, kCodecFormatVersion, creator);
+  f.WriteString("/provenance", c.info().provenance.dump());
+  f.CreateGroup("/codec");
+  f.SetAttr("/codec", "method", MethodName(c.method()));
+  f.SetAttr("/codec", "color_space", c.info().color_space);
+  f.SetAttr("/codec", "units", c.info().units);
+  f.SetAttr("/codec", "cos_theta_i_included", std::int64_t(c.info().cos_theta_i_included ? 1 : 0));
+  f.SetAttr("/codec", "channel_names", Join(c.info().channel_names));
+  f.SetAttr("/codec", "texel_size_mm", c.info().texel_size_mm);
+  f.SetAttr("/codec", "height", std::int64_t(c.height()));
+  f.SetAttr("/codec", "width", std::int64_t(c.width()));
+  f.SetAttr("/codec", "channels", std::int64_t(c.channels()));
+  f.SetAttr("/codec", "transform", std::string(c.transform() == ValueTransform::kLog ? "log" : "none"));
+  f.SetAttr("/codec", "log_epsilon", c.log_epsilon());
+  f.SetAttr("/codec", "storage", std::string(storage_ == h5::Storage::kFloat16 ? "float16" : "float32"));
+  WriteSamplingTables(f, "/codec/view", c.views());
+  WriteSamplingTables(f, "/codec/light", c.lights());
+  if (c.method() == CodecMethod::kPcaView) f.CreateGroup("/codec/pca_view");
+}
+
+void CodecFileWriter::WritePcaViewSlot(int v, const PcaViewSlot& s) {
+  file_.WriteFloats(SlotName("mean", v), {H_, W_, C_}, s.mean.data(), storage_);
+  if (s.components > 0) {
+    const hsize_t k = s.components;
+    file_.WriteFloats(SlotName("basis", v), {k, H_, W_, C_}, s.basis.data(), storage_);
+    file_.WriteFloats(SlotName("weights", v), {L_, k}, s.weights.data(), storage_);
+    file_.WriteDoubles(SlotName("eigenvalues", v), {k}, s.eigenvalues.data());
   }
-  out.Commit();
+  file_.StartWriteback();
+}
+
+void CodecFileWriter::Finish(const Codec& c, int slots_written) {
+  h5::File& f = file_;
+  const hsize_t V = c.num_views(), L = L_, H = H_, W = W_, C = C_;
+  const h5::Storage st = storage_;
+  if (c.method() == CodecMethod::kPcaView) {
+    std::vector<std::int32_t> comps;
+    for (const auto& s : c.pca_view()) comps.push_back(s.components);
+    f.WriteInts("/codec/pca_view/components", {V}, comps.data());
+    for (int v = slots_written; v < c.num_views(); ++v) WritePcaViewSlot(v, c.pca_view()[static_cast<std::size_t>(v)]);
+  } else if (IsFullMatrixFactorisation(c.method())) {
+    WriteFmfModel(f, c.fmf(), c.num_views(), c.height(), c.width());
+  } else if (c.method() == CodecMethod::kLpcaTensor) {
+    WriteLpcaTensorModel(f, c.lpca_tensor(), c.height(), c.width());
+  } else {
+    const LpcaModel& m = c.lpca();
+    const hsize_t K = m.clusters, k = m.components;
+    f.CreateGroup("/codec/lpca");
+    f.SetAttr("/codec/lpca", "clusters", std::int64_t(K));
+    f.SetAttr("/codec/lpca", "components", std::int64_t(k));
+    f.WriteFloats("/codec/lpca/means", {K, V, L, C}, m.means.data(), st);
+    f.WriteInts("/codec/lpca/cluster_components", {K}, m.cluster_components.data());
+    f.WriteInts("/codec/lpca/cluster_index", {H, W}, m.cluster_of.data());
+    if (k > 0) {
+      f.WriteFloats("/codec/lpca/basis", {K, k, V, L, C}, m.basis.data(), st);
+      f.WriteFloats("/codec/lpca/weights", {H, W, k}, m.weights.data(), st);
+    }
+  }
+  f.WriteString("/codec/compression", c.provenance().dump());
+  f.Close();  // throws if the data did not all reach the file: nothing is committed
+  out_.Commit();
 }
 
 Codec ReadCodec(const std::filesystem::path& path) {

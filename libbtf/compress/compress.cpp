@@ -13,6 +13,7 @@
 #include <omp.h>
 
 #include "libbtf/compress/codec.h"
+#include "libbtf/compress/codec_writer.h"
 #include "libbtf/compress/lpca_reassign.h"
 #include "libbtf/compress/pca.h"
 #include "libbtf/core/distributed.h"
@@ -245,8 +246,13 @@ void UnpackSlot(const std::vector<std::uint8_t>& bytes, PcaViewSlot& s, ErrorSta
 // not depend on which rank computes it, and the errors are merged in slot order, so rank 0's
 // codec and summary are those of the single-process run. The other ranks end with only their
 // own slots.
-void CompressPcaView(const SlotSource& in, const CompressOptions& o, const Transform& tr, Codec& codec,
-                     CompressSummary& sum, const Reporter& rep) {
+//
+// With a writer (one process only), each slot goes to the file as soon as it and the slots before
+// it are done, in view order, and its arrays are freed: at most one slot per thread waits in
+// memory, and the kernel writes the codec back while the decomposition goes on. Returns the
+// bytes of the slots so written (the codec keeps only their component counts).
+std::uint64_t CompressPcaView(const SlotSource& in, const CompressOptions& o, const Transform& tr, Codec& codec,
+                              CompressSummary& sum, const Reporter& rep, CodecFileWriter* writer) {
   const int V = in.views().size(), L = in.lights().size();
   const std::size_t n = in.slot_size();
   auto& slots = CodecBuilder::slots(codec);
@@ -277,6 +283,10 @@ void CompressPcaView(const SlotSource& in, const CompressOptions& o, const Trans
   std::atomic<bool> stop{false};
   std::vector<std::exception_ptr> failures(static_cast<std::size_t>(M));
   std::exception_ptr cancelled;
+  BTF_CHECK(!writer || M == V);
+  std::vector<char> finished_slot(static_cast<std::size_t>(V), 0);
+  int written = 0;
+  std::uint64_t written_values = 0;
 #pragma omp parallel num_threads(P)
   {
     omp_set_num_threads(1);  // Eigen and the reader's inflate sequential in this thread
@@ -293,6 +303,16 @@ void CompressPcaView(const SlotSource& in, const CompressOptions& o, const Trans
         }
         const std::size_t u = static_cast<std::size_t>(v);
         slot_err[u] = CompressViewSlot(in, v, raw, o, tr, slots[u], &slot_dropped[u]);
+        if (writer) {  // under the reading lock: HDF5 is never called concurrently
+          const std::lock_guard<std::mutex> lock(reading);
+          finished_slot[u] = 1;
+          for (; written < V && finished_slot[static_cast<std::size_t>(written)]; ++written) {
+            PcaViewSlot& s = slots[static_cast<std::size_t>(written)];
+            writer->WritePcaViewSlot(written, s);
+            written_values += s.mean.size() + s.basis.size() + s.weights.size();
+            s = PcaViewSlot{s.components, {}, {}, {}, {}};
+          }
+        }
       } catch (...) {
         failures[static_cast<std::size_t>(i)] = std::current_exception();
         stop = true;
@@ -338,6 +358,7 @@ void CompressPcaView(const SlotSource& in, const CompressOptions& o, const Trans
     rep.Info("{}", sum.warnings.back());
   }
   FillErrors(err, sum);
+  return written_values * (o.storage == CodecStorage::kHalf ? 2 : 4);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1679,10 +1700,9 @@ std::uint64_t FullCodecBytes(const CompressSummary& sum, const Codec& codec) {
   return static_cast<std::uint64_t>(values * 4);
 }
 
-}  // namespace
-
-CompressSummary Compress(const CompressOptions& options, const SlotSource& input_full, Codec* codec_out,
-                         const Reporter& rep) {
+// Compress, and with `out` also the codec file (CompressToFile).
+CompressSummary CompressAndWrite(const CompressOptions& options, const SlotSource& input_full, Codec* codec_out,
+                                 AtomicOutput* out, const std::string& creator, const Reporter& rep) {
   options.Check();
   BTF_CHECK(codec_out != nullptr);
   CompressOptions o = options;
@@ -1721,8 +1741,11 @@ CompressSummary Compress(const CompressOptions& options, const SlotSource& input
   sum.height = in.height();
   sum.width = in.width();
   sum.channels = in.channels();
+  std::optional<CodecFileWriter> writer;
+  if (out && o.method == CodecMethod::kPcaView && !dist::Distributed()) writer.emplace(*out, codec, creator);
+  std::uint64_t streamed_bytes = 0;
   if (o.method == CodecMethod::kPcaView) {
-    CompressPcaView(in, o, tr, codec, sum, rep);
+    streamed_bytes = CompressPcaView(in, o, tr, codec, sum, rep, writer ? &*writer : nullptr);
   } else if (o.method == CodecMethod::kLpcaTensor) {
     CompressLpcaTensor(in, o, tr, codec, sum, rep);
   } else if (IsFullMatrixFactorisation(o.method)) {
@@ -1735,7 +1758,7 @@ CompressSummary Compress(const CompressOptions& options, const SlotSource& input
   }
   sum.components = 0;
   for (int c : sum.slot_components) sum.components = std::max(sum.components, c);
-  sum.codec_bytes = codec.StoredBytes();
+  sum.codec_bytes = streamed_bytes + codec.StoredBytes();
   sum.raw_float32_bytes = codec.RawBytes(4);
   sum.raw_half_bytes = codec.RawBytes(2);
   sum.ratio_float32 = sum.codec_bytes ? double(sum.raw_float32_bytes) / double(sum.codec_bytes) : 0;
@@ -1749,8 +1772,29 @@ CompressSummary Compress(const CompressOptions& options, const SlotSource& input
   if (o.scene) prov["scene"] = o.scene->ToJson();
   prov["summary"] = sum.ToJson();
   CodecBuilder::provenance(codec) = prov;
+  if (out) {  // timed in the returned summary only: the file holds the summary before it is written
+    Timer t;
+    if (writer) {
+      writer->Finish(codec, codec.num_views());
+    } else {
+      WriteCodec(*out, codec, creator);
+    }
+    sum.times.Add("write", t.Seconds());
+  }
   *codec_out = std::move(codec);
   return sum;
+}
+
+}  // namespace
+
+CompressSummary Compress(const CompressOptions& options, const SlotSource& input, Codec* codec, const Reporter& rep) {
+  return CompressAndWrite(options, input, codec, nullptr, {}, rep);
+}
+
+CompressSummary CompressToFile(const CompressOptions& options, const SlotSource& input, AtomicOutput* out,
+                               const std::string& creator, const Reporter& rep) {
+  Codec codec;
+  return CompressAndWrite(options, input, &codec, out, creator, rep);
 }
 
 }  // namespace btf

@@ -110,6 +110,11 @@ class File {
   // Returns the version string.
   std::string CheckFormatHeader(const std::string& format, int supported_major) const;
 
+  // Asks the kernel to start writing this file's data written so far back to the disk, without
+  // waiting (sync_file_range; best effort: nothing happens where the driver has no descriptor),
+  // so that a long write's final fsync waits only for its tail.
+  void StartWriteback() const;
+
   // Flushes and closes a file written through this object. Throws btf::Error (I/O) naming the
   // file when the data did not all reach it (disk full, I/O error): never commit it then.
   void Close();

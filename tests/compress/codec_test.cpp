@@ -8,6 +8,8 @@
 #include <map>
 #include <set>
 
+#include <omp.h>
+
 #include "libbtf/compress/pca.h"
 #include "libbtf/core/error.h"
 #include "libbtf/io/dataset_io.h"
@@ -543,6 +545,48 @@ TEST(CodecFile, RoundTripIsExactForBothMethods) {
     DecodeToDatasetFile(r, out);
     EXPECT_EQ(ReadDataset(out).data(), codec.DecodeAll().data());
   }
+}
+
+// CompressToFile writes per-view PCA slot by slot while it decomposes (the others compress, then
+// write): the file must read back as Compress + WriteCodec's, for both storages and thread counts,
+// and a run cancelled half way must leave neither the output nor its temporary behind.
+TEST(CodecFile, CompressToFileEqualsCompressThenWriteAndACancelLeavesNothing) {
+  const Dataset d = test::ClusteredLowRank(test::BonnSubset(9), test::BonnSubset(6, 2), 6, 5, 2, 2);
+  const auto dir = test::TempDir();
+  const int threads = omp_get_max_threads();
+  CompressOptions half = PcaView(3);
+  half.storage = CodecStorage::kHalf;
+  for (const CompressOptions& o : {PcaView(3), half, Lpca(2, 2)}) {
+    CompressSummary want;
+    const Codec ref = test::CompressDataset(d, o, &want);
+    WriteCodec(dir / "ref.h5", ref);
+    for (int t : {1, 2}) {
+      omp_set_num_threads(t);
+      AtomicOutput out(dir / "streamed.h5");
+      const CompressSummary got = CompressToFile(o, *MemorySource(d), &out, "test");
+      omp_set_num_threads(threads);
+      const std::string what = fmt::format("{} {} {} threads", MethodName(o.method), StorageName(o.storage), t);
+      EXPECT_EQ(got.codec_bytes, want.codec_bytes) << what;
+      EXPECT_EQ(got.relative_error, want.relative_error) << what;
+      const Codec a = ReadCodec(dir / "streamed.h5"), b = ReadCodec(dir / "ref.h5");
+      test::ExpectSameCodec(a, b, what);
+      EXPECT_EQ(a.StoredBytes(), got.codec_bytes) << what;
+      EXPECT_EQ(a.provenance()["summary"]["relative_error"], b.provenance()["summary"]["relative_error"]) << what;
+      EXPECT_TRUE(got.times.ToJson().contains("write")) << what;
+    }
+  }
+  // Cancelled after the second of nine slots, with the first already in the temporary file (one
+  // thread: with two, the caller's thread, which reports progress, may get fewer slots).
+  std::size_t calls = 0;
+  const Reporter stop_early({}, [&](std::size_t, std::size_t, std::string_view) { return ++calls < 2; });
+  omp_set_num_threads(1);
+  {
+    AtomicOutput out(dir / "cancelled.h5");
+    EXPECT_THROW(CompressToFile(PcaView(3), *MemorySource(d), &out, "test", stop_early), Cancelled);
+  }
+  omp_set_num_threads(threads);
+  for (const auto& e : std::filesystem::directory_iterator(dir))
+    EXPECT_TRUE(e.path().filename() == "ref.h5" || e.path().filename() == "streamed.h5") << e.path();
 }
 
 void SetStringAttr(const std::filesystem::path& path, const char* name, const std::string& value) {

@@ -43,11 +43,10 @@ int RunCompress(const CLI::App& app, const btf::cli::CommonFlags& common, Compre
     target.emplace(f.output);
     target->Reserve();
   }
-  btf::Codec codec;
   // A dataset file or a Bonn .btf file (decoded one view slot at a time).
   const auto input = btf::IsBonnFile(f.dataset) ? btf::OpenBonnSource(f.dataset) : btf::OpenDatasetSource(f.dataset);
-  const btf::CompressSummary s = btf::Compress(f.options, *input, &codec, btf::cli::MakeReporter(common));
-  if (target) btf::WriteCodec(*target, codec, "btf-compress");
+  const btf::CompressSummary s = btf::CompressToFile(f.options, *input, target ? &*target : nullptr, "btf-compress",
+                                                     btf::cli::MakeReporter(common));
   btf::cli::PrintSummary(app, common, s, {{"output", f.output}});
   if (!common.json && btf::cli::PrintingRank()) fmt::print("  output                {}\n", f.output);
   return 0;
