@@ -339,15 +339,13 @@ py::object Compress(const std::filesystem::path& input, const std::filesystem::p
   target.Reserve();
   const auto source = OpenCompressInput(input);
   PyReporter reporter(progress);
-  btf::Codec codec;
   btf::CompressSummary s;
   try {
-    s = btf::Compress(o, *source, &codec, reporter.Make());
+    s = btf::CompressToFile(o, *source, &target, "libbtf-python", reporter.Make());
   } catch (const btf::Cancelled&) {
     reporter.Rethrow();
     throw;
   }
-  btf::WriteCodec(target, codec, "libbtf-python");
   nlohmann::json j = s.ToJson();
   j["output"] = output.string();
   return ToPython(j);
