@@ -29,6 +29,7 @@
 #include <unistd.h>
 
 #include "libbtf/compress/codec.h"
+#include "libbtf/compress/compress.h"
 #include "libbtf/compress/gram_kernel.h"
 #include "libbtf/compress/lpca_reassign.h"
 #include "libbtf/compress/pca.h"
@@ -314,10 +315,10 @@ void BM_Lpca(benchmark::State& st) {
   o.method = btf::CodecMethod::kLpca;
   o.clusters = 32;
   o.components = 8;
-  o.max_iterations = static_cast<int>(st.range(0));
-  o.gram_limit = static_cast<int>(st.range(1));
-  o.lpca_warm_start = st.range(2) != 0;
-  o.lpca_prune = st.range(3) != 0;
+  o.lpca.max_iterations = static_cast<int>(st.range(0));
+  o.lpca.gram_limit = static_cast<int>(st.range(1));
+  o.lpca.warm_start = st.range(2) != 0;
+  o.lpca.prune = st.range(3) != 0;
   btf::CompressSummary s;
   const auto source = btf::MemorySource(d);
   for (auto _ : st) {
@@ -326,10 +327,10 @@ void BM_Lpca(benchmark::State& st) {
   }
   SetSizeCounters(st);
   const btf::CompressOptions defaults;
-  const bool is_default = o.gram_limit == defaults.gram_limit && o.lpca_warm_start == defaults.lpca_warm_start &&
-                          o.lpca_prune == defaults.lpca_prune;
-  st.SetLabel("gram_limit " + std::to_string(o.gram_limit) + (o.lpca_warm_start ? ", warm start" : ", cold start") +
-              (o.lpca_prune ? ", pruned" : ", every cluster") + (is_default ? " (default)" : " (before)"));
+  const bool is_default = o.lpca.gram_limit == defaults.lpca.gram_limit && o.lpca.warm_start == defaults.lpca.warm_start &&
+                          o.lpca.prune == defaults.lpca.prune;
+  st.SetLabel("gram_limit " + std::to_string(o.lpca.gram_limit) + (o.lpca.warm_start ? ", warm start" : ", cold start") +
+              (o.lpca.prune ? ", pruned" : ", every cluster") + (is_default ? " (default)" : " (before)"));
   // Clusters whose residual a texel's reassignment computed, mean over the reassignments.
   double compared = 0;
   for (double c : s.lpca_compared) compared += c / double(s.lpca_compared.size());
@@ -403,7 +404,7 @@ void BM_LpcaTensor(benchmark::State& st) {
   o.method = btf::CodecMethod::kLpcaTensor;
   o.clusters = 32;
   o.components = 8;
-  o.quant_bits = 8;
+  o.tensor.quant_bits = 8;
   btf::CompressSummary s;
   const auto source = btf::MemorySource(d);
   for (auto _ : st) {

@@ -3,7 +3,8 @@
 #     (LAYERS_FILE: one line per module, "module: the modules it may use", written by
 #     libbtf/CMakeLists.txt from the targets' dependencies);
 #  2. docs/architecture.md's layer table lists exactly the same graph;
-#  3. no public header under libbtf/ includes a tests/ or tools/ header.
+#  3. no public header under libbtf/ includes a tests/ or tools/ header;
+#  4. inside compress/, no file includes one of a layer above its own (compress_layers below).
 # Usage: cmake -DSOURCE_DIR=<repo> -DLAYERS_FILE=<build>/btf_layers.txt -P CheckLayers.cmake
 file(STRINGS "${LAYERS_FILE}" layer_lines)
 set(errors "")
@@ -34,6 +35,44 @@ foreach(module IN LISTS modules)
         string(APPEND errors "  ${rel}: '${inc}': library code includes ${CMAKE_MATCH_1}/\n")
       endif()
     endforeach()
+  endforeach()
+endforeach()
+
+# Inside compress/: files in layers, each including only its own layer and those below
+# (docs/architecture.md, "Inside compress/"). Every file must match one layer.
+set(compress_layers
+  "codec:^(codec|codec_io|codec_writer|codec_source|value_transform|fmf_codec|lpca_tensor|lpca_reassign|pca|gram_kernel|scene|bonn_fmf|bonn_pvf)\\."
+  "shared:^(compress_options|compress_summary|method)\\."
+  "methods:^(pca_view|lpca|lpca_internal|lpca_rows|lpca_sample|lpca_fit|lpca_tensor_method|fmf_method|neural_[a-z_]+)\\."
+  "controller:^compress\\.")
+function(compress_layer file out)
+  set(index 0)
+  foreach(entry IN LISTS compress_layers)
+    string(REGEX MATCH "^([a-z]+):(.*)$" _ "${entry}")
+    if(file MATCHES "${CMAKE_MATCH_2}")
+      set(${out} ${index} PARENT_SCOPE)
+      return()
+    endif()
+    math(EXPR index "${index} + 1")
+  endforeach()
+  set(${out} -1 PARENT_SCOPE)
+endfunction()
+file(GLOB compress_files "${SOURCE_DIR}/libbtf/compress/*.h" "${SOURCE_DIR}/libbtf/compress/*.cpp")
+foreach(f IN LISTS compress_files)
+  get_filename_component(name "${f}" NAME)
+  compress_layer("${name}" own)
+  if(own EQUAL -1)
+    string(APPEND errors "  libbtf/compress/${name}: in no layer of compress/ (add it to compress_layers in cmake/CheckLayers.cmake)\n")
+    continue()
+  endif()
+  file(STRINGS "${f}" includes REGEX "^#include \"libbtf/compress/")
+  foreach(inc IN LISTS includes)
+    string(REGEX MATCH "libbtf/compress/([a-z_0-9.]+)\"" _ "${inc}")
+    set(used "${CMAKE_MATCH_1}")
+    compress_layer("${used}" theirs)
+    if(theirs GREATER own)
+      string(APPEND errors "  libbtf/compress/${name}: includes '${used}', a layer above its own (compress/ layers: codec, shared, methods, controller)\n")
+    endif()
   endforeach()
 endforeach()
 

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "libbtf/compress/codec.h"
+#include "libbtf/compress/compress.h"
 #include "libbtf/core/error.h"
 #include "libbtf/io/hdf5.h"
 
@@ -169,9 +170,9 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
     t.method = btf::CodecMethod::kLpcaTensor;
     t.clusters = 2;
     t.components = 2;
-    t.quant_bits = i == 4 ? 8 : 16;
+    t.tensor.quant_bits = i == 4 ? 8 : 16;
     t.log_transform = i == 4;
-    t.tensor_growth = 0;  // every term: the largest factor arrays the tiny input gives
+    t.tensor.growth = 0;  // every term: the largest factor arrays the tiny input gives
     base_paths[std::size_t(i)] = dir + (i == 4 ? "/tensor8.h5" : "/tensor16.h5");
     btf::Compress(t, *btf::MemorySource(d), &codec);
     btf::WriteCodec(base_paths[std::size_t(i)], codec);

@@ -14,6 +14,7 @@
 #include <string>
 
 #include "libbtf/compress/codec.h"
+#include "libbtf/compress/compress.h"
 #include "libbtf/compress/codec_source.h"
 #include "libbtf/core/eigen_setup.h"
 #include "libbtf/core/error.h"
@@ -305,7 +306,7 @@ struct PyReporter {
 
 // The tools' input choice for compression: a Bonn .btf file or a dataset file.
 std::unique_ptr<btf::SlotSource> OpenCompressInput(const std::filesystem::path& path) {
-  return btf::IsBonnFile(path) ? btf::OpenBonnSource(path) : btf::OpenDatasetSource(path);
+  return btf::OpenCompressInput(path);
 }
 
 py::object Compress(const std::filesystem::path& input, const std::filesystem::path& output, const std::string& method,
@@ -321,17 +322,17 @@ py::object Compress(const std::filesystem::path& input, const std::filesystem::p
   o.retained_energy = energy;
   o.max_bytes = bytes;
   o.storage = btf::ParseStorage(storage);
-  o.quant_bits = quant_bits;
-  o.tensor_growth = tensor_growth;
+  o.tensor.quant_bits = quant_bits;
+  o.tensor.growth = tensor_growth;
   o.seed = seed;
   o.log_transform = log;
   o.log_epsilon = log_epsilon;
-  o.max_iterations = max_iterations;
-  o.min_improvement = min_improvement;
-  o.lpca_memory = lpca_memory;
-  o.lpca_sample = lpca_sample;
-  o.lpca_splits = lpca_splits;
-  o.lpca_matrix = lpca_matrix;
+  o.lpca.max_iterations = max_iterations;
+  o.lpca.min_improvement = min_improvement;
+  o.lpca.memory = lpca_memory;
+  o.lpca.sample = lpca_sample;
+  o.lpca.splits = lpca_splits;
+  o.lpca.matrix = lpca_matrix;
   if (scene) o.scene = btf::SceneSpec::Load(*scene);
   o.Check();
   // As btf-compress: claim the output first, so an unwritable folder fails before the work.
@@ -446,10 +447,10 @@ PYBIND11_MODULE(libbtf, m) {
         py::arg("method") = btf::MethodName(co.method), py::arg("components") = co.components,
         py::arg("clusters") = co.clusters, py::arg("error") = co.target_error, py::arg("energy") = co.retained_energy,
         py::arg("bytes") = co.max_bytes, py::arg("storage") = btf::StorageName(co.storage),
-        py::arg("quant_bits") = co.quant_bits, py::arg("tensor_growth") = co.tensor_growth, py::arg("seed") = co.seed, py::arg("log") = co.log_transform, py::arg("log_epsilon") = co.log_epsilon,
-        py::arg("max_iterations") = co.max_iterations, py::arg("min_improvement") = co.min_improvement,
-        py::arg("lpca_memory") = co.lpca_memory, py::arg("lpca_sample") = co.lpca_sample,
-        py::arg("lpca_splits") = co.lpca_splits, py::arg("lpca_matrix") = co.lpca_matrix,
+        py::arg("quant_bits") = co.tensor.quant_bits, py::arg("tensor_growth") = co.tensor.growth, py::arg("seed") = co.seed, py::arg("log") = co.log_transform, py::arg("log_epsilon") = co.log_epsilon,
+        py::arg("max_iterations") = co.lpca.max_iterations, py::arg("min_improvement") = co.lpca.min_improvement,
+        py::arg("lpca_memory") = co.lpca.memory, py::arg("lpca_sample") = co.lpca.sample,
+        py::arg("lpca_splits") = co.lpca.splits, py::arg("lpca_matrix") = co.lpca.matrix,
         py::arg("scene") = py::none(), py::arg("progress") = py::none(),
         "btf-compress INPUT -o OUTPUT with the same options; returns its --json summary as a dict");
 

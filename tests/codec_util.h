@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "libbtf/compress/codec.h"
+#include "libbtf/compress/compress.h"
 #include "libbtf/io/slot_source.h"
 
 namespace btf::test {

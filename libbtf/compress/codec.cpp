@@ -77,138 +77,8 @@ CodecStorage ParseStorage(const std::string& name) {
   ThrowUsage("unknown coefficient storage '{}' (use float or half)", name);
 }
 
-void CompressOptions::Check() const {
-  BTF_CHECK_OPTION(components >= 1 && components <= 4096, "components", "must be 1..4096");
-  BTF_CHECK_OPTION(clusters >= 1 && clusters <= 65535, "clusters", "must be 1..65535");
-  BTF_CHECK_OPTION(target_error >= 0 && target_error < 1, "error", "a relative RMS error in [0, 1)");
-  BTF_CHECK_OPTION(retained_energy >= 0 && retained_energy <= 1, "energy", "a fraction in [0, 1]");
-  BTF_CHECK_OPTION(!(target_error > 0 && retained_energy > 0), "error/energy", "give at most one of the two");
-  BTF_CHECK_OPTION(max_bytes == 0 || (target_error == 0 && retained_energy == 0), "bytes",
-                   "give at most one of --bytes, --error and --energy");
-  BTF_CHECK_OPTION(quant_bits == 8 || quant_bits == 16, "quant_bits", "must be 8 or 16");
-  BTF_CHECK_OPTION(tensor_growth >= 0 && std::isfinite(tensor_growth), "tensor_growth", "must be >= 0");
-  BTF_CHECK_OPTION(method != CodecMethod::kLpcaTensor || retained_energy == 0, "energy",
-                   "lpca-tensor takes --error or --bytes (its terms are chosen by the codec's error)");
-  BTF_CHECK_OPTION(method != CodecMethod::kLpcaTensor || storage == CodecStorage::kFloat, "storage",
-                   "lpca-tensor stores quantised codes (--quant-bits), not float or half arrays");
-  BTF_CHECK_OPTION(log_epsilon > 0 && std::isfinite(log_epsilon), "log_epsilon", "must be > 0");
-  BTF_CHECK_OPTION(max_iterations >= 0 && max_iterations <= 1000, "max_iterations", "must be 0..1000");
-  BTF_CHECK_OPTION(min_improvement >= 0 && min_improvement < 1, "min_improvement", "must be in [0, 1)");
-  BTF_CHECK_OPTION(lpca_memory == "auto" || lpca_memory == "in-core" || lpca_memory == "out-of-core", "lpca_memory",
-                   "must be auto, in-core or out-of-core");
-  BTF_CHECK_OPTION(lpca_matrix == "half" || lpca_matrix == "float", "lpca_matrix", "must be half or float");
-  BTF_CHECK_OPTION(gram_limit >= 1, "gram_limit", "must be >= 1");
-  BTF_CHECK_OPTION(lpca_sample >= 1, "lpca_sample", "must be >= 1");
-  BTF_CHECK_OPTION(lpca_splits >= 0 && lpca_splits <= 1000, "lpca_splits", "must be 0..1000");
-  BTF_CHECK_OPTION(storage == CodecStorage::kFloat || !IsFullMatrixFactorisation(method), "storage",
-                   "half storage is for pca-view and lpca codecs (fmf/dfmf factors are stored as float)");
-}
-
-nlohmann::json CompressOptions::ToJson() const {
-  return {{"method", MethodName(method)},   {"components", components},
-          {"clusters", clusters},           {"target_error", target_error},
-          {"retained_energy", retained_energy}, {"seed", seed},
-          {"log_transform", log_transform}, {"log_epsilon", log_epsilon},
-          {"max_iterations", max_iterations}, {"min_improvement", min_improvement}, {"lpca_memory", lpca_memory},
-          {"lpca_sample", lpca_sample},     {"lpca_splits", lpca_splits},     {"lpca_matrix", lpca_matrix},
-          {"gram_limit", gram_limit},       {"lpca_warm_start", lpca_warm_start},
-          {"lpca_prune", lpca_prune},       {"storage", StorageName(storage)},
-          {"max_bytes", max_bytes},         {"quant_bits", quant_bits},
-          {"tensor_growth", tensor_growth}};
-}
-
-nlohmann::json CompressSummary::ToJson() const {
-  nlohmann::json j;
-  j["method"] = method;
-  j["storage"] = storage;
-  j["input"] = input;
-  j["shape"] = {{"views", views}, {"lights", lights}, {"height", height}, {"width", width}, {"channels", channels}};
-  j["components"] = components;
-  const bool lpca_like = method == "lpca" || method == "lpca-tensor";
-  j[lpca_like ? "cluster_components" : method == "fmf" || method == "dfmf" ? "matrix_components" : "slot_components"] =
-      slot_components;
-  if (lpca_like) {
-    j["clusters"] = clusters;
-    j["iteration_relative_errors"] = iteration_errors;
-    j["iteration_reassigned_texels"] = iteration_changes;
-    j["reassignment_clusters_compared"] = lpca_compared;
-    j["sample_round_relative_errors"] = sample_errors;
-    j["split_merge_relative_errors"] = split_errors;
-    j["lpca_memory"] = {{"mode", lpca_memory}, {"matrix", lpca_matrix}, {"input_passes", lpca_passes},
-                        {"peak_rss_bytes", peak_rss_bytes}};
-  }
-  if (method == "lpca-tensor")
-    j["tensor"] = {{"terms", tensor_terms},
-                   {"quant_bits", quant_bits},
-                   {"lpca_stage_relative_error", lpca_stage_error},
-                   {"predicted_relative_error", predicted_error}};
-  j["codec_bytes"] = codec_bytes;
-  j["raw_float32_bytes"] = raw_float32_bytes;
-  j["raw_half_bytes"] = raw_half_bytes;
-  j["ratio_vs_float32"] = ratio_float32;
-  j["ratio_vs_half"] = ratio_half;
-  j["rmse"] = rmse;
-  j["relative_error"] = relative_error;
-  j["max_abs_error"] = max_abs_error;
-  j["psnr_db"] = psnr_db;
-  j["psnr_peak"] = psnr_peak;
-  j["psnr_peak_definition"] = psnr_peak_definition;
-  j["warnings"] = warnings;
-  if (scene_used) {
-    j["scene"] = {{"input_shape",
-                   {{"views", input_views}, {"lights", input_lights}, {"height", input_height},
-                    {"width", input_width}, {"channels", input_channels}}},
-                  {"full_codec_bytes", full_codec_bytes},
-                  {"bytes_saved", bytes_saved},
-                  {"error_on_used_directions", relative_error}};
-  }
-  j["seconds"] = times.ToJson();
-  return j;
-}
-
-std::string CompressSummary::Report() const {
-  std::string r = fmt::format("{} ({})\n", input, method);
-  r += fmt::format("  shape                 {} views x {} lights x {} x {} texels x {} channels\n", views, lights, width,
-                   height, channels);
-  if (method == "lpca" || method == "lpca-tensor")
-    r += fmt::format("  clusters x components {} x {} (max per cluster)\n", clusters, components);
-  if (method == "lpca-tensor")
-    r += fmt::format("  factor terms          {} ({}-bit codes; LPCA stage error {:.6g}, predicted {:.6g})\n", tensor_terms,
-                     quant_bits, lpca_stage_error, predicted_error);
-  else if (method == "fmf" || method == "dfmf")
-    r += fmt::format("  components            {} (per matrix: {})\n", components, fmt::join(slot_components, " "));
-  else
-    r += fmt::format("  components            {} (max per view slot)\n", components);
-  r += fmt::format("  codec size            {} ({} bytes; coefficients, {} storage)\n", FormatBytes(codec_bytes), codec_bytes,
-                   storage);
-  r += fmt::format("  ratio                 {:.2f}:1 vs float32 raw ({}), {:.2f}:1 vs half raw ({})\n", ratio_float32,
-                   FormatBytes(raw_float32_bytes), ratio_half, FormatBytes(raw_half_bytes));
-  r += fmt::format("  RMSE                  {:.6g}\n", rmse);
-  r += fmt::format("  relative error        {:.6g} (||decoded - input|| / ||input||)\n", relative_error);
-  r += fmt::format("  PSNR                  {:.2f} dB (peak = {} = {:.6g})\n", psnr_db, psnr_peak_definition, psnr_peak);
-  if (method == "lpca" || method == "lpca-tensor")
-    r += fmt::format("  iteration errors      {:.5f}\n", fmt::join(iteration_errors, " "));
-  if (!lpca_compared.empty())
-    r += fmt::format("  clusters compared     {:.2f} (per texel, each reassignment)\n", fmt::join(lpca_compared, " "));
-  if (!sample_errors.empty())
-    r += fmt::format("  sample round errors   {:.5f}\n", fmt::join(sample_errors, " "));
-  if (!split_errors.empty())
-    r += fmt::format("  split/merge errors    {:.5f}\n", fmt::join(split_errors, " "));
-  if (!lpca_memory.empty())
-    r += fmt::format("  lpca memory           {}, {} texel matrix, {} passes over the input, peak memory {}\n", lpca_memory,
-                     lpca_matrix, lpca_passes, FormatBytes(peak_rss_bytes));
-  if (scene_used)
-    r += fmt::format("  scene                 kept {}/{} views, {}/{} lights; full codec {} -> saved {}; error on used "
-                     "directions {:.6g}\n",
-                     views, input_views, lights, input_lights, FormatBytes(full_codec_bytes), FormatBytes(bytes_saved),
-                     relative_error);
-  r += fmt::format("  time                  {}\n", times.Report());
-  for (const auto& w : warnings) r += fmt::format("  warning               {}\n", w);
-  return r;
-}
-
 Codec CodecBuilder::Make(CodecMethod method, Sampling views, Sampling lights, int height, int width, int channels,
-                         DatasetInfo info, ValueTransform transform, double log_epsilon) {
+                         DatasetInfo info, const ValueMap& transform) {
   Codec c;
   c.method_ = method;
   c.views_ = std::move(views);
@@ -217,8 +87,7 @@ Codec CodecBuilder::Make(CodecMethod method, Sampling views, Sampling lights, in
   c.width_ = width;
   c.channels_ = channels;
   c.info_ = std::move(info);
-  c.transform_ = transform;
-  c.log_epsilon_ = log_epsilon;
+  c.value_map_ = transform;
   return c;
 }
 
@@ -238,11 +107,6 @@ std::uint64_t Codec::StoredBytes() const {
 
 std::uint64_t Codec::RawBytes(int bytes_per_value) const {
   return std::uint64_t(num_views()) * num_lights() * image_size() * std::uint64_t(bytes_per_value);
-}
-
-float Codec::Untransform(float y) const {
-  if (transform_ == ValueTransform::kLog) return static_cast<float>(std::exp(double(y)) - log_epsilon_);
-  return y;
 }
 
 void Codec::SampleTransformed(int view, int light, std::size_t texel, float* out) const {
@@ -308,7 +172,7 @@ void Codec::DecodeViewSlot(int view, float* out) const {
                      [&](int k) { return &m.means[std::size_t(k) * d + base]; },
                      [&](int k, int j) { return &m.basis[(std::size_t(k) * m.components + j) * d + base]; }, out);
   }
-  if (transform_ != ValueTransform::kNone) {
+  if (value_map_.kind != ValueTransform::kNone) {
     const std::size_t n = std::size_t(L) * D;
 #pragma omp parallel for schedule(static)
     for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(n); ++i) out[i] = Untransform(out[i]);
@@ -329,11 +193,11 @@ void Codec::DecodeImage(int view, int light, float* out) const {
       const Eigen::Map<const Eigen::VectorXf> w(&s.weights[std::size_t(light) * s.components], s.components);
       o.noalias() += b.transpose() * w;
     }
-    if (transform_ != ValueTransform::kNone)
+    if (value_map_.kind != ValueTransform::kNone)
       for (std::size_t i = 0; i < D; ++i) out[i] = Untransform(out[i]);
   } else if (IsFullMatrixFactorisation(method_)) {
     fmf_.DecodeImage(view, light, out);
-    if (transform_ != ValueTransform::kNone)
+    if (value_map_.kind != ValueTransform::kNone)
       for (std::size_t i = 0; i < D; ++i) out[i] = Untransform(out[i]);
   } else if (method_ == CodecMethod::kLpcaTensor) {
     // Every cluster function at (view, light) first (K (1 + c) C values), then per texel.
@@ -468,7 +332,7 @@ nlohmann::json Codec::Describe() const {
   j["raw_half_bytes"] = RawBytes(2);
   j["ratio_vs_float32"] = StoredBytes() ? double(RawBytes(4)) / double(StoredBytes()) : 0.0;
   j["ratio_vs_half"] = StoredBytes() ? double(RawBytes(2)) / double(StoredBytes()) : 0.0;
-  j["transform"] = transform_ == ValueTransform::kLog ? nlohmann::json{{"kind", "log"}, {"epsilon", log_epsilon_}}
+  j["transform"] = value_map_.log() ? nlohmann::json{{"kind", "log"}, {"epsilon", value_map_.epsilon}}
                                                       : nlohmann::json{{"kind", "none"}};
   j["color_space"] = info_.color_space;
   j["units"] = info_.units;

@@ -171,8 +171,7 @@ Codec ReadCodec(const std::filesystem::path& path) {
     ThrowBadInput("'{}': log transform with invalid epsilon {}", path.string(), eps);
   Sampling views = ReadSamplingTables(f, "/codec/view"), lights = ReadSamplingTables(f, "/codec/light");
   const hsize_t V = views.size(), L = lights.size(), D = hsize_t(H) * W * C;
-  Codec c = CodecBuilder::Make(method, views, lights, H, W, C, info, tr == "log" ? ValueTransform::kLog : ValueTransform::kNone,
-                               eps);
+  Codec c = CodecBuilder::Make(method, views, lights, H, W, C, info, ValueMap{tr == "log" ? ValueTransform::kLog : ValueTransform::kNone, eps});
   CodecBuilder::storage(c) = storage == "float16" ? CodecStorage::kHalf : CodecStorage::kFloat;
   if (f.Exists("/codec/compression")) {
     auto j = nlohmann::json::parse(f.ReadString("/codec/compression"), nullptr, false);

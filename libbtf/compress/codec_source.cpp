@@ -34,12 +34,16 @@ std::unique_ptr<SlotSource> OpenCodecSource(const std::filesystem::path& path) {
   return std::make_unique<CodecSlotSource>(ReadCodec(path), path.string());
 }
 
-std::unique_ptr<SlotSource> OpenSource(const std::filesystem::path& path) {
+std::unique_ptr<SlotSource> OpenSource(const std::filesystem::path& path, const DatasetReadOptions& read) {
   const std::string format = FileFormatOf(path);
-  if (format == kDatasetFormat) return OpenDatasetSource(path);
+  if (format == kDatasetFormat) return OpenDatasetSource(path, read);
   if (format == kCodecFormat) return OpenCodecSource(path);
   if (IsBonnFormat(format)) return OpenBonnSource(path);
   ThrowBadInput("'{}' holds format '{}'; expected a libbtf dataset or codec, or a Bonn .btf file", path.string(), format);
+}
+
+std::unique_ptr<SlotSource> OpenCompressInput(const std::filesystem::path& path, const DatasetReadOptions& read) {
+  return IsBonnFile(path) ? OpenBonnSource(path) : OpenDatasetSource(path, read);
 }
 
 }  // namespace btf

@@ -45,7 +45,7 @@ constexpr int kTermTag = 16;
 // (rows l + L v); columns are texels. View v contributes `rows_per_view` contiguous rows.
 class Matrices {
  public:
-  Matrices(const SlotSource& s, bool decorrelate, const SlotTransform& transform)
+  Matrices(const SlotSource& s, bool decorrelate, const ValueMap& transform)
       : s_(s), decorrelate_(decorrelate), transform_(transform), slot_(s.slot_size()),
         texels_(std::size_t(s.width()) * s.height()) {}
   int count() const { return decorrelate_ ? 3 : 1; }
@@ -56,7 +56,7 @@ class Matrices {
   void Read(int v, std::vector<MatrixXd>& out) {
     s_.ReadViewSlot(v, slot_.data());
     CheckFiniteSlot(s_, v, slot_.data());
-    if (transform_) transform_(v, slot_.data(), slot_.size());
+    transform_.Apply(s_.name(), v, slot_.data(), slot_.size());
     const int L = s_.lights().size(), C = s_.channels();
     out.resize(std::size_t(count()));
     for (auto& m : out) m.resize(rows_per_view(), cols());
@@ -75,7 +75,7 @@ class Matrices {
  private:
   const SlotSource& s_;
   bool decorrelate_;
-  const SlotTransform& transform_;
+  const ValueMap& transform_;
   std::vector<float> slot_;
   std::size_t texels_;
 };
@@ -170,8 +170,8 @@ void FmfModel::Sample(int view, int light, std::size_t texel, float* out) const 
   for (int c = 0; c < 3; ++c) out[c] = float(rgb[c]);
 }
 
-FmfModel FactoriseFmf(const FmfSvdOptions& options, const SlotSource& input, const SlotTransform& transform,
-                      const Reporter& reporter, int* dropped) {
+FmfModel FactoriseFmf(const FmfSvdOptions& options, const SlotSource& input, const ValueMap& transform,
+                      const Reporter& reporter, int* dropped, const dist::Context& ranks) {
   options.Check();
   if (options.decorrelate && input.channels() != 3)
     ThrowUsage("'{}' has {} channels; DFMF's YUV decorrelation needs 3: use FMF instead", input.name(),
@@ -184,7 +184,7 @@ FmfModel FactoriseFmf(const FmfSvdOptions& options, const SlotSource& input, con
   const Eigen::Index r = std::min<Eigen::Index>(k + options.oversampling, full);
   // z and q, one view block, and one view's X^T q term (received by rank 0 in a distributed run).
   CheckAllocation(8.0 * M * double(r) * double(D + 2 * T) + 8.0 * double(R) * double(T) * M,
-                  dist::Distributed() ? fmt::format("'{}': factorisation (on this rank)", input.name())
+                  ranks.distributed() ? fmt::format("'{}': factorisation (on this rank)", input.name())
                                       : fmt::format("'{}': factorisation", input.name()));
   // Randomised range finder (Halko et al. 2011) streamed over view slots: Y = X Omega, then
   // power iterations Y = X (X^T Q), then B = Q^T X and the SVD of the small B.
@@ -206,25 +206,25 @@ FmfModel FactoriseFmf(const FmfSvdOptions& options, const SlotSource& input, con
   auto range = [&](bool first) {  // q = orth(X z)
     std::vector<double> view_energy(std::size_t(M) * nv, 0.0);  // [m * nv + v]
     for (int v = 0; v < nv; ++v) {
-      if (!dist::Owns(v)) continue;
+      if (!ranks.Owns(v)) continue;
       x.Read(v, block);
       for (int m = 0; m < M; ++m) {
         q[std::size_t(m)].middleRows(R * v, R) = block[std::size_t(m)] * z[std::size_t(m)];
         if (first) view_energy[std::size_t(m) * nv + v] = block[std::size_t(m)].squaredNorm();
       }
     }
-    if (dist::Distributed()) {  // every rank gets every view's rows (and energies)
+    if (ranks.distributed()) {  // every rank gets every view's rows (and energies)
       std::vector<double> mine;
-      for (int v = dist::Rank(); v < nv; v += dist::Size())
+      for (int v = ranks.rank(); v < nv; v += ranks.size())
         for (int m = 0; m < M; ++m) {
           const MatrixXd rows = q[std::size_t(m)].middleRows(R * v, R);
           mine.insert(mine.end(), rows.data(), rows.data() + rows.size());
           mine.push_back(view_energy[std::size_t(m) * nv + v]);
         }
-      const std::vector<double> all = dist::AllGatherConcat(mine);
+      const std::vector<double> all = ranks.AllGatherConcat(mine);
       std::size_t at = 0;
-      for (int rank = 0; rank < dist::Size(); ++rank)
-        for (int v = rank; v < nv; v += dist::Size())
+      for (int rank = 0; rank < ranks.size(); ++rank)
+        for (int v = rank; v < nv; v += ranks.size())
           for (int m = 0; m < M; ++m) {
             q[std::size_t(m)].middleRows(R * v, R) = Eigen::Map<const MatrixXd>(all.data() + at, R, r);
             at += std::size_t(R * r);
@@ -242,26 +242,26 @@ FmfModel FactoriseFmf(const FmfSvdOptions& options, const SlotSource& input, con
     for (auto& zm : z) zm.setZero();
     const std::size_t bytes = sizeof(double) * std::size_t(T) * std::size_t(r);
     for (int v = 0; v < nv; ++v) {
-      const int owner = dist::Owner(v);
-      if (dist::Rank() == owner) {
+      const int owner = ranks.Owner(v);
+      if (ranks.rank() == owner) {
         x.Read(v, block);
         for (int m = 0; m < M; ++m)
           term[std::size_t(m)].noalias() = block[std::size_t(m)].transpose() * q[std::size_t(m)].middleRows(R * v, R);
         if (owner != 0) {  // rank 0 receives the views in order; messages from one rank keep their order
-          for (const auto& tm : term) dist::Send(0, kTermTag, tm.data(), bytes);
+          for (const auto& tm : term) ranks.Send(0, kTermTag, tm.data(), bytes);
           continue;
         }
-      } else if (dist::Rank() == 0) {
+      } else if (ranks.rank() == 0) {
         for (auto& tm : term) {
           tm.resize(T, r);
-          dist::Recv(owner, kTermTag, tm.data(), bytes);
+          ranks.Recv(owner, kTermTag, tm.data(), bytes);
         }
       } else {
         continue;
       }
       for (int m = 0; m < M; ++m) z[std::size_t(m)] += term[std::size_t(m)];
     }
-    for (auto& zm : z) dist::Broadcast(0, zm.data(), bytes);
+    for (auto& zm : z) ranks.Broadcast(0, zm.data(), bytes);
     progress();
   };
   range(true);
@@ -296,33 +296,6 @@ FmfModel FactoriseFmf(const FmfSvdOptions& options, const SlotSource& input, con
   }
   if (dropped) *dropped = drops;
   return model;
-}
-
-void CompressFmf(const SlotSource& in, const CompressOptions& o, const SlotTransform& transform, Codec& codec,
-                 CompressSummary& sum, const Reporter& rep) {
-  FmfSvdOptions so;
-  so.decorrelate = o.method == CodecMethod::kDfmf;
-  so.components = o.components;
-  so.seed = o.seed;
-  so.target_error = o.target_error;
-  so.retained_energy = o.retained_energy;
-  const double rows = double(in.views().size()) * in.lights().size() * (so.decorrelate ? 1 : in.channels());
-  const double rank = std::min(rows, double(in.width()) * in.height());
-  if (o.components > rank) {
-    sum.warnings.push_back(fmt::format("components {} clamped to {} (the rank bound min(directions{}, texels))",
-                                       o.components, rank, so.decorrelate ? "" : " x channels"));
-    if (dist::Rank() == 0) rep.Warn("{}", sum.warnings.back());  // the same on every rank: reported once
-  }
-  Timer t;
-  int dropped = 0;
-  FmfModel& model = CodecBuilder::fmf(codec);
-  model = FactoriseFmf(so, in, transform, rep, &dropped);
-  sum.times.Add("factorise", t.Seconds());
-  for (const auto& m : model.matrices) sum.slot_components.push_back(m.components);
-  if (dropped > 0) {
-    sum.warnings.push_back(fmt::format("{} components with ~0 singular value dropped (rank-deficient data)", dropped));
-    rep.Info("{}", sum.warnings.back());
-  }
 }
 
 void WriteFmfModel(const h5::File& f, const FmfModel& model, int views, int height, int width) {

@@ -11,6 +11,8 @@
 #include <string>
 #include <vector>
 
+#include "libbtf/compress/value_transform.h"
+#include "libbtf/core/distributed.h"
 #include "libbtf/core/error_stats.h"
 #include "libbtf/core/progress.h"
 #include "libbtf/io/slot_source.h"
@@ -20,9 +22,6 @@ namespace btf {
 namespace h5 {
 class File;
 }
-class Codec;
-struct CompressOptions;
-struct CompressSummary;
 
 // One factorised matrix X (rows x texels) ~ U SxV^T with SxV = V diag(S). Rows are directions
 // (FMF: c + C (l + L v); DFMF: l + L v), columns texels t = x + W y (y = 0 the top row).
@@ -65,22 +64,15 @@ struct FmfSvdOptions {
   void Check() const;
 };
 
-// Called on every view slot as it is read (after the NaN/Inf check), in place; e.g. a log transform.
-using SlotTransform = std::function<void(int view, float* slot, std::size_t n)>;
-
 // Factorises `input` (read 2 + 2 power_iterations times, one view slot at a time). Components
 // carrying at most 1e-12 of a matrix's energy are dropped (counted in *dropped). NaN/Inf in the
 // input: btf::Error (bad input) naming the item; DFMF of other than 3 channels: btf::Error (usage).
 // Distributed (a collective: every rank calls it; docs/scaling.md): each rank reads only the view
 // slots it owns (round robin), and every rank returns the same model, bit-identical to one process's.
-FmfModel FactoriseFmf(const FmfSvdOptions& options, const SlotSource& input, const SlotTransform& transform = {},
-                      const Reporter& reporter = {}, int* dropped = nullptr);
-
-// btf-compress --method fmf|dfmf: fills the codec's model, the summary's per-matrix components,
-// warnings and factorise time (Compress then measures the decoded codec's errors, as for the
-// other methods). Distributed as FactoriseFmf.
-void CompressFmf(const SlotSource& input, const CompressOptions& options, const SlotTransform& transform,
-                 Codec& codec, CompressSummary& summary, const Reporter& reporter);
+// `transform` is applied to every view slot as it is read (after the NaN/Inf check).
+FmfModel FactoriseFmf(const FmfSvdOptions& options, const SlotSource& input, const ValueMap& transform = {},
+                      const Reporter& reporter = {}, int* dropped = nullptr,
+                      const dist::Context& ranks = dist::Context::World());
 
 // The model's items in a codec file (docs/format.md, "Codec file": /codec/fmf/...). The reader
 // refuses wrong shapes, non-finite values and component counts above the rank (bad input).

@@ -3,9 +3,11 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <numeric>
 #include <set>
 
 #include <Eigen/Geometry>
+#include <fmt/ranges.h>
 
 #include "libbtf/core/atomic_file.h"
 #include "libbtf/core/error.h"
@@ -129,6 +131,82 @@ std::vector<int> NeededDirections(const Sampling& sampling, const std::vector<Di
     }
   }
   return {used.begin(), used.end()};
+}
+
+namespace {
+
+// Keeps only what the scene uses: view/light subsets, a mip level (box filter over 2^m x 2^m
+// texels; trailing rows/columns that do not fill a block are dropped), a channel subset.
+class SceneSlotSource final : public SlotSource {
+ public:
+  SceneSlotSource(const SlotSource& in, const SceneSpec& scene)
+      : in_(in),
+        view_index_(NeededDirections(in.views(), scene.views)),
+        light_index_(NeededDirections(in.lights(), scene.lights)),
+        block_(1 << scene.mip_level) {
+    const DatasetInfo in_info = in.info();
+    if (scene.channels.empty()) {
+      channel_index_.resize(static_cast<std::size_t>(in.channels()));
+      std::iota(channel_index_.begin(), channel_index_.end(), 0);
+    } else {
+      for (const auto& name : scene.channels) {
+        const auto it = std::find(in_info.channel_names.begin(), in_info.channel_names.end(), name);
+        if (it == in_info.channel_names.end())
+          ThrowBadInput("scene names channel '{}', which '{}' does not have (channels: {})", name, in.name(),
+                        fmt::join(in_info.channel_names, ","));
+        channel_index_.push_back(static_cast<int>(it - in_info.channel_names.begin()));
+      }
+    }
+    if (in.height() < block_ || in.width() < block_)
+      ThrowBadInput("scene mip level {} needs at least {} x {} texels; '{}' has {} x {}", scene.mip_level, block_,
+                    block_, in.name(), in.width(), in.height());
+    views_ = in.views().Subset(view_index_);
+    lights_ = in.lights().Subset(light_index_);
+    info_ = in_info;
+    info_.channel_names.clear();
+    for (int c : channel_index_) info_.channel_names.push_back(in_info.channel_names[static_cast<std::size_t>(c)]);
+    info_.texel_size_mm = in_info.texel_size_mm * block_;
+  }
+  const std::string& name() const override { return in_.name(); }
+  std::string kind() const override { return in_.kind(); }
+  const Sampling& views() const override { return views_; }
+  const Sampling& lights() const override { return lights_; }
+  int height() const override { return in_.height() / block_; }
+  int width() const override { return in_.width() / block_; }
+  int channels() const override { return static_cast<int>(channel_index_.size()); }
+  DatasetInfo info() const override { return info_; }
+  void ReadViewSlot(int v, float* dst) const override {
+    std::vector<float> buf(in_.slot_size());
+    in_.ReadViewSlot(view_index_[static_cast<std::size_t>(v)], buf.data());
+    const int b = block_, H = height(), W = width(), C = channels(), iW = in_.width(), iC = in_.channels();
+    const double norm = 1.0 / (double(b) * b);
+    for (std::size_t l = 0; l < light_index_.size(); ++l) {
+      const float* img = &buf[std::size_t(light_index_[l]) * in_.image_size()];
+      for (int y = 0; y < H; ++y)
+        for (int x = 0; x < W; ++x)
+          for (int c = 0; c < C; ++c) {
+            double s = 0;
+            for (int dy = 0; dy < b; ++dy)
+              for (int dx = 0; dx < b; ++dx)
+                s += img[(std::size_t(y * b + dy) * iW + (x * b + dx)) * iC +
+                         channel_index_[static_cast<std::size_t>(c)]];
+            dst[((l * H + y) * std::size_t(W) + x) * C + c] = static_cast<float>(s * norm);
+          }
+    }
+  }
+
+ private:
+  const SlotSource& in_;
+  std::vector<int> view_index_, light_index_, channel_index_;
+  int block_;
+  Sampling views_, lights_;
+  DatasetInfo info_;
+};
+
+}  // namespace
+
+std::unique_ptr<SlotSource> MakeSceneSource(const SlotSource& input, const SceneSpec& scene) {
+  return std::make_unique<SceneSlotSource>(input, scene);
 }
 
 }  // namespace btf

@@ -4,12 +4,14 @@
 // channels. Compression keeps only the sampled directions whose barycentric support reaches a
 // used direction, the mip level's texels and the named channels.
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 
 #include "libbtf/core/directions.h"
+#include "libbtf/io/slot_source.h"
 
 namespace btf {
 
@@ -35,5 +37,10 @@ struct SceneSpec {
 // touch (Sampling::Barycentric support of the cone's center and of points on rings at 1/4, 1/2,
 // 3/4 and 1 of its half angle, 24 per ring, clipped to the upper hemisphere). Empty cones = all.
 std::vector<int> NeededDirections(const Sampling& sampling, const std::vector<DirectionCone>& cones);
+
+// `input` seen through a scene: only the views and lights it needs, at its mip level (a box
+// filter over 2^m x 2^m texels; trailing rows and columns that do not fill a block are dropped),
+// its channels. Refuses (bad input) channels the input lacks and a mip level it is too small for.
+std::unique_ptr<SlotSource> MakeSceneSource(const SlotSource& input, const SceneSpec& scene);
 
 }  // namespace btf

@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <cstring>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -65,6 +66,41 @@ std::vector<T> AllGatherConcat(const std::vector<T>& mine) {
   }
   return out;
 }
+
+// The ranks one computation runs on, passed down to the code that splits its work, so that
+// library code does not ask the process's job itself: World() is this process's MPI job (one
+// rank outside a launcher), Single() this process alone whatever the job. On one rank the
+// collectives below return their input and nothing is sent.
+class Context {
+ public:
+  static Context World() { return Context(Rank(), Size()); }
+  static Context Single() { return Context(0, 1); }
+  int rank() const { return rank_; }
+  int size() const { return size_; }
+  bool distributed() const { return size_ > 1; }
+  bool Owns(int item) const { return item % size_ == rank_; }
+  int Owner(int item) const { return item % size_; }
+
+  void Send(int to, int tag, const void* data, std::size_t bytes) const { dist::Send(to, tag, data, bytes); }
+  void Recv(int from, int tag, void* data, std::size_t bytes) const { dist::Recv(from, tag, data, bytes); }
+  void SendBytes(int to, int tag, const std::vector<std::uint8_t>& bytes) const { dist::SendBytes(to, tag, bytes); }
+  std::vector<std::uint8_t> RecvBytes(int from, int tag) const { return dist::RecvBytes(from, tag); }
+  void Broadcast(int root, void* data, std::size_t bytes) const {
+    if (distributed()) dist::Broadcast(root, data, bytes);
+  }
+  std::vector<std::uint8_t> BroadcastBytes(int root, std::vector<std::uint8_t> bytes) const {
+    return distributed() ? dist::BroadcastBytes(root, std::move(bytes)) : bytes;
+  }
+  double AllMax(double x) const { return distributed() ? dist::AllMax(x) : x; }
+  template <typename T>
+  std::vector<T> AllGatherConcat(const std::vector<T>& mine) const {
+    return distributed() ? dist::AllGatherConcat(mine) : mine;
+  }
+
+ private:
+  Context(int rank, int size) : rank_(rank), size_(size) {}
+  int rank_, size_;
+};
 
 // Packs trivially copyable values and vectors of them into bytes, and reads them back in the
 // same order (all ranks run the same binary, so no byte-order or layout conversion is needed).

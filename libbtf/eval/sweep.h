@@ -10,6 +10,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "libbtf/compress/compress.h"
 #include "libbtf/core/progress.h"
 #include "libbtf/core/timer.h"
 #include "libbtf/eval/render.h"

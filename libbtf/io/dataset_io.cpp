@@ -180,8 +180,7 @@ void WriteDataset(const std::filesystem::path& path, const Dataset& d, const Dat
 DatasetReader::DatasetReader(const std::filesystem::path& path, const DatasetReadOptions& options)
     : file_(h5::File::Open(path)) {
   header_ = ReadHeader(file_);
-  const char* env = std::getenv("BTF_RAW_CHUNKS");
-  raw_chunks_ = options.raw_chunks && !(env && std::string(env) == "0");
+  raw_chunks_ = options.raw_chunks;
 }
 
 void DatasetReader::ReadImage(int view, int light, float* out) const {

@@ -23,8 +23,8 @@ struct DatasetReadOptions {
   // true: the chunks of /btf/data are read raw and decoded on the compute threads (Fletcher-32,
   // libdeflate inflate, unshuffle, half -> float; docs/btf-compress.md "Reading"), whenever the
   // file stores them as libbtf writes them; other files, and false: H5Dread (single-threaded
-  // zlib). Both give the same values. BTF_RAW_CHUNKS=0 in the environment sets false for every
-  // reader (A/B timings of the tools).
+  // zlib). Both give the same values. The tools set false when the environment has
+  // BTF_RAW_CHUNKS=0 (A/B timings).
   bool raw_chunks = true;
 };
 

@@ -10,6 +10,7 @@
 #include <limits>
 
 #include "libbtf/compress/codec.h"
+#include "libbtf/compress/compress.h"
 #include "libbtf/core/error.h"
 #include "libbtf/core/hash.h"
 #include "libbtf/compress/codec_source.h"
@@ -143,7 +144,7 @@ RoundTrip Roundtrip(const Dataset& d, CodecMethod method, int components, int cl
   o.components = components;
   o.clusters = std::max(clusters, 1);  // pca-view ignores it
   o.log_transform = log_transform;
-  o.lpca_matrix = lpca_matrix;
+  o.lpca.matrix = lpca_matrix;
   RoundTrip r;
   Codec codec;
   r.summary = Compress(o, *MemorySource(d), &codec);

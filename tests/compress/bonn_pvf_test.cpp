@@ -1,4 +1,5 @@
 // A per-view PCA codec written as Bonn PVF and read back by the PVF reader.
+#include "libbtf/compress/compress.h"
 #include "libbtf/compress/bonn_pvf.h"
 
 #include <gtest/gtest.h>

@@ -1,4 +1,5 @@
 #include "libbtf/compress/codec.h"
+#include "libbtf/compress/compress.h"
 
 #include <gtest/gtest.h>
 #include <hdf5.h>
@@ -37,7 +38,7 @@ CompressOptions Lpca(int k, int c) {
 // the input by up to 2^-11 relative (lpca_ooc_test.cpp bounds that path).
 CompressOptions LpcaFloat(int k, int c) {
   CompressOptions o = Lpca(k, c);
-  o.lpca_matrix = "float";
+  o.lpca.matrix = "float";
   return o;
 }
 
@@ -104,7 +105,7 @@ TEST(Pca, LpcaGramLimitTakesTheRandomizedPathForLargeClustersAndItLosesLittle) {
   const RowMatrixXf X = ClusterShaped(300, 3);
   PcaRequest q;
   q.max_components = 8;
-  q.gram_limit = CompressOptions{}.gram_limit;
+  q.gram_limit = CompressOptions{}.lpca.gram_limit;
   const PcaResult rnd = Pca(X, q);
   q.gram_limit = 1024;
   const PcaResult gram = Pca(X, q);
@@ -417,7 +418,7 @@ TEST(PcaView, NonFiniteInputIsRefusedNamingTheItem) {
   d.at(1, 3, 2, 1, 0) = std::numeric_limits<float>::infinity();
   for (const char* matrix : {"half", "float"}) {
     CompressOptions o = Lpca(2, 2);
-    o.lpca_matrix = matrix;
+    o.lpca.matrix = matrix;
     try {
       test::CompressDataset(d, o);
       ADD_FAILURE() << "Inf accepted, " << matrix;
@@ -704,7 +705,7 @@ TEST(Options, CheckRejectsBadValues) {
   o.retained_energy = 0.9;
   EXPECT_THROW(o.Check(), Error);
   o = CompressOptions{};
-  o.lpca_splits = -1;
+  o.lpca.splits = -1;
   EXPECT_THROW(o.Check(), Error);
   EXPECT_THROW(ParseMethod("jpeg"), Error);
 }

@@ -11,6 +11,7 @@
 
 #include "libbtf/compress/bonn_fmf.h"
 #include "libbtf/compress/codec.h"
+#include "libbtf/compress/compress.h"
 #include "libbtf/core/error.h"
 #include "libbtf/io/bonn.h"
 #include "libbtf/io/hdf5.h"

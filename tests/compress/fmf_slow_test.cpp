@@ -10,6 +10,7 @@
 
 #include "libbtf/compress/bonn_fmf.h"
 #include "libbtf/compress/codec.h"
+#include "libbtf/compress/compress.h"
 #include "libbtf/io/bonn.h"
 #include "tests/test_util.h"
 
@@ -52,7 +53,7 @@ class FirstViews final : public SlotSource {
 TEST(FmfSlow, Ubo2014SizeDfmfByOurWriterInBtfInfoAndPcaViewPerSlotMemory) {
   const Sampling dome = Sampling::Ubo151();
   const int n = dome.size(), w = 400, h = 400, k = 4;
-  Codec codec = CodecBuilder::Make(CodecMethod::kDfmf, dome, dome, h, w, 3, DatasetInfo{}, ValueTransform::kNone, 0);
+  Codec codec = CodecBuilder::Make(CodecMethod::kDfmf, dome, dome, h, w, 3, DatasetInfo{}, ValueMap{});
   FmfModel& m = CodecBuilder::fmf(codec);
   m.decorrelated = true;
   m.lights = n;

@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <string>
 
+#include "libbtf/compress/compress.h"
 #include "libbtf/compress/bonn_fmf.h"
 #include "libbtf/core/error.h"
 #include "libbtf/io/bonn.h"
@@ -37,8 +38,8 @@ CompressOptions Lpca(int k, const std::string& memory, const std::string& matrix
   o.method = CodecMethod::kLpca;
   o.clusters = k;
   o.components = 3;
-  o.lpca_memory = memory;
-  o.lpca_matrix = matrix;
+  o.lpca.memory = memory;
+  o.lpca.matrix = matrix;
   return o;
 }
 
@@ -83,7 +84,7 @@ TEST(LpcaOutOfCore, EqualsInCoreOnTheRandomizedPath) {
   for (const std::string matrix : {"float", "half"}) {
     SCOPED_TRACE(matrix);
     CompressOptions in_core = Lpca(8, "in-core", matrix), out_of_core = Lpca(8, "out-of-core", matrix);
-    in_core.gram_limit = out_of_core.gram_limit = 1;
+    in_core.lpca.gram_limit = out_of_core.lpca.gram_limit = 1;
     CompressSummary in, out;
     const Codec a = test::CompressDataset(d, in_core, &in);
     Codec b;
@@ -162,7 +163,7 @@ TEST(LpcaHalfMatrix, ErrorStaysWithinTheRoundingOfTheFloatPath) {
   o.components = 2;
   CompressSummary f, h;
   test::CompressDataset(d, o, &f);
-  o.lpca_matrix = "half";
+  o.lpca.matrix = "half";
   test::CompressDataset(d, o, &h);
   EXPECT_EQ(f.lpca_matrix, "float");
   EXPECT_EQ(h.lpca_matrix, "half");

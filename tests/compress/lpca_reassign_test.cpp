@@ -187,9 +187,9 @@ TEST(LpcaPrune, GivesTheCodecOfComparingEveryCluster) {
     o.method = CodecMethod::kLpca;
     o.clusters = 16;
     o.components = 3;
-    o.lpca_matrix = matrix;
+    o.lpca.matrix = matrix;
     CompressOptions all = o;
-    all.lpca_prune = false;
+    all.lpca.prune = false;
     CompressSummary sp, sa;
     const Codec a = test::CompressDataset(d, o, &sp), b = test::CompressDataset(d, all, &sa);
     test::ExpectSameCodec(a, b);

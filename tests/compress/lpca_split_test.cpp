@@ -65,13 +65,13 @@ TEST(LpcaSplitMerge, LeavesTheKMeansMinimumForOneClusterPerLine) {
   o.method = CodecMethod::kLpca;
   o.clusters = 4;
   o.components = 1;
-  o.lpca_matrix = "float";
+  o.lpca.matrix = "float";
   for (std::uint64_t seed : {1, 2, 3}) {
     o.seed = seed;
-    o.lpca_splits = 0;
+    o.lpca.splits = 0;
     CompressSummary plain, split;
     test::CompressDataset(d, o, &plain);
-    o.lpca_splits = CompressOptions().lpca_splits;
+    o.lpca.splits = CompressOptions().lpca.splits;
     test::CompressDataset(d, o, &split);
     std::printf("seed %d: truth %.6f, without split/merge %.6f, with %.6f (%zu trials)\n", int(seed), truth,
                 plain.relative_error, split.relative_error, split.split_errors.size());

@@ -12,6 +12,7 @@
 #include <random>
 
 #include "libbtf/compress/codec.h"
+#include "libbtf/compress/compress.h"
 #include "libbtf/core/error.h"
 #include "libbtf/io/hdf5.h"
 #include "tests/codec_util.h"
@@ -81,7 +82,7 @@ TEST(LpcaTensor, ErrorTargetIsMetWithFewerBytesThanTheLpcaItFactorises) {
   for (int bits : {16, 8}) {
     for (double target : {0.05, 0.02}) {
       CompressOptions o = Tensor();
-      o.quant_bits = bits;
+      o.tensor.quant_bits = bits;
       o.target_error = target;
       CompressSummary s;
       const Codec c = test::CompressDataset(d, o, &s);
@@ -154,7 +155,7 @@ TEST(LpcaTensor, CodecFileRoundTripsExactly) {
   const Dataset d = TwoMaterials();
   for (int bits : {8, 16}) {
     CompressOptions o = Tensor();
-    o.quant_bits = bits;
+    o.tensor.quant_bits = bits;
     o.target_error = 0.03;
     const Codec c = test::CompressDataset(d, o);
     const auto path = test::TempDir() / "t.h5";
@@ -199,7 +200,7 @@ TEST(LpcaTensor, ResultsDoNotDependOnTheThreadCount) {
 TEST(LpcaTensor, DamagedCodecFilesAreRefusedNamingFileAndItem) {
   const Dataset d = TwoMaterials(4, 5, 6, 6);
   CompressOptions o = Tensor(2, 3);
-  o.quant_bits = 8;
+  o.tensor.quant_bits = 8;
   o.target_error = 0.05;
   const Codec c = test::CompressDataset(d, o);
   const auto dir = test::TempDir();
@@ -270,7 +271,7 @@ TEST(LpcaTensor, DamagedCodecFilesAreRefusedNamingFileAndItem) {
 
 TEST(LpcaTensor, OptionsAreChecked) {
   CompressOptions o = Tensor();
-  o.quant_bits = 12;
+  o.tensor.quant_bits = 12;
   EXPECT_EQ(ExitCodeOf([&] { o.Check(); }), ExitCode::kUsage);
   o = Tensor();
   o.max_bytes = 1000, o.target_error = 0.1;

@@ -7,6 +7,7 @@
 #include <random>
 
 #include "libbtf/compress/codec.h"
+#include "libbtf/compress/compress.h"
 #include "libbtf/compress/pca.h"
 #include "libbtf/core/error.h"
 #include "tests/codec_util.h"
@@ -152,12 +153,12 @@ TEST(Determinism, OneAndTwoThreadsGiveIdenticalCodecs) {
   EXPECT_GE(s.split_errors.size(), 1u) << s.ToJson().dump();
   // Mini-batch local-PCA rounds on a 300-texel sample (two blocks of 256, the second partial),
   // then rounds over all texels.
-  o.lpca_sample = 300;
+  o.lpca.sample = 300;
   s = same(cl, o);
   EXPECT_GE(s.sample_errors.size(), 2u) << s.ToJson().dump();
   // The same through the randomized path (gram_limit 1; d = 60 values per texel), whose refits
   // and first fit over all texels are warm-started (CompressOptions::lpca_warm_start).
-  o.gram_limit = 1;
+  o.lpca.gram_limit = 1;
   s = same(cl, o);
   EXPECT_GE(s.iteration_errors.size(), 2u) << s.ToJson().dump();
 }

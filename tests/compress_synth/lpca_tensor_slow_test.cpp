@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include "libbtf/compress/codec.h"
+#include "libbtf/compress/compress.h"
 #include "libbtf/synth/btf_generator.h"
 #include "libbtf/synth/model.h"
 #include "tests/codec_util.h"
@@ -29,7 +30,7 @@ TEST(LpcaTensorDoneWhen, ThreeTimesSmallerThanLpca32x8AtNoWorseError) {
     CompressOptions o = lo;
     o.method = CodecMethod::kLpcaTensor;
     o.components = 12;  // a better LPCA stage leaves the factorisation room under LPCA 32 x 8's error
-    o.quant_bits = bits;
+    o.tensor.quant_bits = bits;
     o.target_error = ls.relative_error;
     CompressSummary s;
     test::CompressDataset(d, o, &s);

@@ -8,6 +8,7 @@
 #include <random>
 
 #include "libbtf/compress/codec.h"
+#include "libbtf/compress/compress.h"
 #include "libbtf/export/schneider.h"
 #include "libbtf/export/schneider_reference_decoder.h"
 #include "libbtf/io/dataset_io.h"
@@ -71,7 +72,7 @@ TEST(TwillDoneWhen, Lpca32x8RoundTripsAndMoreComponentsNeverHurt) {
     o.method = CodecMethod::kLpca;
     o.clusters = 32;
     o.components = c;
-    o.max_iterations = 6;
+    o.lpca.max_iterations = 6;
     CompressSummary s;
     const Codec codec = test::CompressDataset(d, o, &s);
     EXPECT_LE(s.relative_error, previous * (1 + 1e-6)) << "c = " << c;
@@ -220,7 +221,7 @@ TEST(TwillDoneWhen, Lpca32x8IsNoWorseThanConvergedLloydPlusLocalPca) {
   EXPECT_LE(s.relative_error, reference + 1e-4);
   // The same with mini-batch local-PCA rounds on a 2048-texel sample (half the texels) before
   // the rounds over all texels (--lpca-sample 2048); the same bound.
-  o.lpca_sample = 2048;
+  o.lpca.sample = 2048;
   CompressSummary m;
   test::CompressDataset(d, o, &m);
   RecordProperty("lpca_sample_2048_relative_error", std::to_string(m.relative_error));

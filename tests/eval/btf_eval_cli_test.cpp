@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "libbtf/compress/codec.h"
+#include "libbtf/compress/compress.h"
 #include "libbtf/export/sattler_reference_decoder.h"
 #include "libbtf/export/schneider_reference_decoder.h"
 #include "libbtf/io/dataset_io.h"

@@ -6,6 +6,7 @@
 #include <cstdlib>
 
 #include "libbtf/compress/codec.h"
+#include "libbtf/compress/compress.h"
 #include "libbtf/compress/codec_source.h"
 #include "libbtf/eval/annotate.h"
 #include "tests/codec_util.h"

@@ -1,3 +1,4 @@
+#include "libbtf/compress/compress.h"
 #include "libbtf/export/sattler.h"
 
 #include <gtest/gtest.h>

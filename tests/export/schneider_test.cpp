@@ -1,3 +1,4 @@
+#include "libbtf/compress/compress.h"
 #include "libbtf/export/schneider.h"
 
 #include <gtest/gtest.h>

@@ -9,6 +9,7 @@
 #include <random>
 
 #include "libbtf/compress/codec.h"
+#include "libbtf/compress/compress.h"
 #include "libbtf/export/sattler.h"
 #include "libbtf/export/sattler_reference_decoder.h"
 #include "libbtf/export/schneider.h"

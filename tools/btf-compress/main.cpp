@@ -6,6 +6,7 @@
 #include <optional>
 
 #include "libbtf/compress/codec.h"
+#include "libbtf/compress/compress.h"
 #include "libbtf/export/sattler.h"
 #include "libbtf/export/schneider.h"
 #include "libbtf/io/bonn.h"
@@ -44,7 +45,7 @@ int RunCompress(const CLI::App& app, const btf::cli::CommonFlags& common, Compre
     target->Reserve();
   }
   // A dataset file or a Bonn .btf file (decoded one view slot at a time).
-  const auto input = btf::IsBonnFile(f.dataset) ? btf::OpenBonnSource(f.dataset) : btf::OpenDatasetSource(f.dataset);
+  const auto input = btf::OpenCompressInput(f.dataset, btf::cli::DatasetReadOptionsFromEnvironment());
   const btf::CompressSummary s = btf::CompressToFile(f.options, *input, target ? &*target : nullptr, "btf-compress",
                                                      btf::cli::MakeReporter(common));
   btf::cli::PrintSummary(app, common, s, {{"output", f.output}});
@@ -107,22 +108,22 @@ int main(int argc, char** argv) {
   app.add_option("--bytes", co.max_bytes,
                  "Byte budget of the stored codec (0 = off): the smallest error within it (lpca-tensor: factor terms; "
                  "others: the largest -c that fits)");
-  app.add_option("--quant-bits", co.quant_bits, "lpca-tensor: bits of the quantised factors and weights (8 or 16)");
-  app.add_option("--tensor-growth", co.tensor_growth,
+  app.add_option("--quant-bits", co.tensor.quant_bits, "lpca-tensor: bits of the quantised factors and weights (8 or 16)");
+  app.add_option("--tensor-growth", co.tensor.growth,
                  "lpca-tensor without --error/--bytes: allowed growth of the LPCA stage's squared error by dropped "
                  "factor terms");
   app.add_option("--seed", co.seed, "Seed of k-means++ and the randomised SVD");
   app.add_flag("--log", co.log_transform, "Compress log(x + epsilon) (HDR data); recorded in the codec");
   app.add_option("--log-epsilon", co.log_epsilon, "Epsilon of --log, in data units");
-  app.add_option("--max-iterations", co.max_iterations, "LPCA: PCA/reassignment rounds at most");
-  app.add_option("--lpca-memory", co.lpca_memory,
+  app.add_option("--max-iterations", co.lpca.max_iterations, "LPCA: PCA/reassignment rounds at most");
+  app.add_option("--lpca-memory", co.lpca.memory,
                  "LPCA: auto (out of core above the memory limit), in-core or out-of-core (stream the view slots)");
-  app.add_option("--lpca-matrix", co.lpca_matrix,
+  app.add_option("--lpca-matrix", co.lpca.matrix,
                  "LPCA: storage of the texel-major matrix, half (2 bytes a value, |x| <= 65504) or float");
-  app.add_option("--min-improvement", co.min_improvement, "LPCA: stop when a round improves the error by less");
-  app.add_option("--lpca-sample", co.lpca_sample,
+  app.add_option("--min-improvement", co.lpca.min_improvement, "LPCA: stop when a round improves the error by less");
+  app.add_option("--lpca-sample", co.lpca.sample,
                  "LPCA: texels of the k-means sample; smaller than the texels: local-PCA rounds on it first");
-  app.add_option("--lpca-splits", co.lpca_splits,
+  app.add_option("--lpca-splits", co.lpca.splits,
                  "LPCA: split/merge trials on the sample after its rounds, at most (0: none)");
   app.add_option("--storage", cf.storage, "Coefficient storage: float (float32) or half (float16, half the size)");
   app.add_option("--scene", cf.scene, "scene.json: keep only the directions, mip level and channels a scene uses");

@@ -42,7 +42,7 @@ int RunConvert(const CLI::App& app, const btf::cli::CommonFlags& common, const C
       }
     }
     // Distributed: each rank reads and multiplies its view slots, rank 0 writes the file.
-    const auto input = btf::OpenSource(f.input);
+    const auto input = btf::OpenSource(f.input, btf::cli::DatasetReadOptionsFromEnvironment());
     btf::cli::PrintSummary(app, common, btf::WriteFmf(o, *input, f.output, btf::cli::MakeReporter(common)));
     return 0;
   }
@@ -53,7 +53,7 @@ int RunConvert(const CLI::App& app, const btf::cli::CommonFlags& common, const C
     btf::cli::PrintSummary(app, common, btf::WritePvf(codec, f.input, f.output, btf::cli::MakeReporter(common)));
     return 0;
   }
-  const auto input = btf::OpenSource(f.input);
+  const auto input = btf::OpenSource(f.input, btf::cli::DatasetReadOptionsFromEnvironment());
   const btf::ConvertSummary s = btf::Convert(f.options, *input, f.output, btf::cli::MakeReporter(common));
   btf::cli::PrintSummary(app, common, s);
   return 0;

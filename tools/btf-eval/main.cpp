@@ -78,8 +78,8 @@ int RunCompare(const CLI::App& app, const btf::cli::CommonFlags& common, Compare
   const btf::Reporter reporter = btf::cli::MakeReporter(common);
   f.options.error_maps_dir = f.maps_dir;
   if (!f.maps_dir.empty()) std::filesystem::create_directories(f.maps_dir);
-  const auto ref = btf::OpenSource(f.reference);
-  const auto test = btf::OpenSource(f.test);
+  const auto ref = btf::OpenSource(f.reference, btf::cli::DatasetReadOptionsFromEnvironment());
+  const auto test = btf::OpenSource(f.test, btf::cli::DatasetReadOptionsFromEnvironment());
   const btf::CompareSummary s = btf::Compare(f.options, *ref, *test, reporter);
   // Thresholds: rmse and rel are errors (bigger is worse), psnr is a quality (smaller is worse).
   const bool higher_is_better = f.metric == "psnr";

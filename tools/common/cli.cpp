@@ -4,6 +4,7 @@
 
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <iostream>
 #include <mutex>
 #include <set>
@@ -79,6 +80,13 @@ class ProgressDisplay {
 };
 
 }  // namespace
+
+DatasetReadOptions DatasetReadOptionsFromEnvironment() {
+  DatasetReadOptions o;
+  const char* env = std::getenv("BTF_RAW_CHUNKS");
+  o.raw_chunks = !(env && std::string(env) == "0");
+  return o;
+}
 
 Reporter MakeReporter(const CommonFlags& flags) {
   // --quiet keeps warnings and errors only; --verbose adds debug lines. In a distributed run only

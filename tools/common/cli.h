@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "libbtf/core/progress.h"
+#include "libbtf/io/dataset_io.h"
 
 namespace btf::cli {
 
@@ -23,6 +24,10 @@ struct CommonFlags {
 // Call right after constructing a tool's app, before declaring options: --version, and every
 // option's default captured from the options struct it binds (so --help and the JSON show it).
 void Configure(CLI::App& app);
+
+// Dataset reading as the environment asks: BTF_RAW_CHUNKS=0 reads through H5Dread instead of
+// the raw chunks (DatasetReadOptions::raw_chunks; A/B timings). The library reads no variable.
+DatasetReadOptions DatasetReadOptionsFromEnvironment();
 
 void AddCommonFlags(CLI::App& app, CommonFlags& flags);
 
