@@ -452,7 +452,7 @@ class Item:
         return f"{self.kind} {self.name} {self.start}-{self.end}"
 
 
-def scan(text, path="<text>", skipped=None):
+def scan(text, path="<text>"):
     """Every function and class definition in `text` (list of Item)."""
     tokens = tokenize(blank_non_code(text))
     items = []
@@ -505,8 +505,6 @@ def scan(text, path="<text>", skipped=None):
         elif kind == "namespace":
             scopes.append(("namespace", prefix + ([name] if name else [])))
         else:  # an initialiser or enum: nothing in it is counted
-            if skipped is not None:
-                skipped.append(Item("other", " ".join(x.text for x in stmt[-6:]), path, start_line, tokens[end].line))
             stmt.extend(tokens[i:end + 1])
             i = end + 1
             continue
