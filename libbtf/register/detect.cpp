@@ -108,19 +108,6 @@ bool ClassicFamily(const std::string& name) {
 
 bool IsArucoFamily(const std::string& family) { return family.rfind(kArucoPrefix, 0) == 0; }
 
-int DetectionSquareModules(const std::string& family, int border_bits) {
-  if (IsArucoFamily(family)) {
-    const cv::Ptr<cv::aruco::Dictionary> d =
-        cv::aruco::getPredefinedDictionary(static_cast<cv::aruco::PREDEFINED_DICTIONARY_NAME>(FindAruco(family)));
-    return d->markerSize + 2 * border_bits;
-  }
-  const FamilyEntry& e = FindFamily(family);
-  apriltag_family_t* f = e.create();
-  const int w = f->width_at_border + 2 * (border_bits - 1);
-  e.destroy(f);
-  return w;
-}
-
 void TagDetectorOptions::Check() const {
   if (IsArucoFamily(family)) {
     FindAruco(family);

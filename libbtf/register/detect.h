@@ -55,10 +55,6 @@ struct TagDetection {
 std::vector<std::string> TagFamilies();
 bool IsArucoFamily(const std::string& family);
 
-// Modules across the detection square (outer edge of the black border) of `family` with a border
-// of `border_bits` modules (tag36h11: 8 with 1 bit, 10 with 2).
-int DetectionSquareModules(const std::string& family, int border_bits);
-
 // One libapriltag detector and family instance. Not thread-safe: use one per thread (notes 1.5).
 class TagDetector {
  public:
