@@ -30,8 +30,7 @@ namespace irawan2012 {
 double SpineRadius(double u, double umax, double kappa, double w, double l);
 
 // von Mises density on the circle, vM(c; b) = e^{b c} / (2 pi I0(|b|)), evaluated in scaled form
-// (no overflow for large |b|). VonMisesNorm(b) = 1 / (2 pi e^{-|b|} I0(|b|)) is the cached part.
-double VonMisesNorm(double b);
+// (no overflow for large |b|).
 double VonMises(double cos_x, double b);
 
 // Seeliger attenuation (1/4pi) c1 c2 / (c1 + c2) with c = max(0, cos); 0 if either is 0.
