@@ -210,8 +210,7 @@ struct PvfView {
   MatrixRef components, weights;
 };
 
-}  // namespace
-
+// "bdi", "dfmf", "fmf", "pvf".
 const char* BonnFormatName(BonnFormat format) {
   switch (format) {
     case BonnFormat::kBdi: return "bdi";
@@ -222,8 +221,12 @@ const char* BonnFormatName(BonnFormat format) {
   return "?";
 }
 
+// DFMF colour models (decorrelations) this reader undoes; others are refused (bad input).
+// 0 RGB, 1 YUV, 3 PCA, 4 YCoCg, 9 Ylog_UV, 10 Ylog_Ulog_Vlog, 11 Ylog_UdivY_VdivY, 12 log RGB.
 bool BonnColorModelSupported(int m) { return m == 0 || m == 1 || m == 3 || m == 4 || (m >= 9 && m <= 12); }
 
+// "rgb", "yuv", "lab", "pca", "ycocg", "spectral", "spectral_linear", "ylog_uv", "ylog_ulog_vlog",
+// "ylog_udivy_vdivy", "log_rgb", or "unknown".
 std::string BonnColorModelName(int m) {
   static const char* const kNames[] = {"rgb",     "yuv",     "lab",           "pca",           "ycocg",
                                        "spectral", "spectral_linear", "unknown", "unknown", "ylog_uv",
@@ -231,6 +234,8 @@ std::string BonnColorModelName(int m) {
   return m >= 0 && m <= 12 ? kNames[m] : "unknown";
 }
 
+// Undoes colour model `model` on `n` pixels of 3 (or, for models 0 and 12, `channels`) values in
+// place. `mean` and `transform` (row-major) are used by model 3 only.
 void BonnUndecorrelate(int model, const std::array<float, 3>& mean, const std::array<float, 9>& t, int channels,
                        float* values, std::size_t n) {
   const double eps = kBonnEpsilon;
@@ -271,6 +276,8 @@ void BonnUndecorrelate(int model, const std::array<float, 3>& mean, const std::a
     p[2] = float(bl);
   }
 }
+
+}  // namespace
 
 std::string BonnSignatureOf(const std::filesystem::path& path) {
   const BinFile f(path);

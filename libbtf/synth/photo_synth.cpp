@@ -227,10 +227,15 @@ void PhotoOptions::Check() const {
                    "response-gamma", "8-bit format (png8 or jpeg) with transfer linear (the response replaces it)");
 }
 
+namespace {
+
+// The camera response of `options` (response_gamma > 0): linear value in [0, 1] -> stored value in [0, 1].
 double CameraResponse(const PhotoOptions& o, double x) {
   const double y = std::pow(std::clamp(x, 0.0, 1.0), 1.0 / o.response_gamma);
   return y / ((1.0 / o.response_bias - 2.0) * (1.0 - y) + 1.0);
 }
+
+}  // namespace
 
 nlohmann::json PhotoSummary::ToJson() const {
   return {{"photos", photos},
