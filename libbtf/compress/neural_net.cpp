@@ -31,11 +31,22 @@ std::uint64_t Mix(std::uint64_t seed, std::uint64_t stream) {
 
 constexpr float kLeakySlope = 0.01f;
 
-// a = act(z), elementwise over n values. ReLU and leaky ReLU as plain loops (the compiler makes
-// them branch-free vector code; Eigen 3.4's select() is scalar and branches on the sign);
-// softplus and SiLU through Eigen's vectorized exp.
+// d[i] *= (z[i] > 0 ? 1 : slope). Written so that GCC 12 vectorizes it (checked with
+// -fopt-info-vec): a factor chosen between two constants into a temporary; the same select
+// written inline, or a choice between two computed values, stays a scalar loop with a branch on
+// the sign (with Eigen 3.4's select(), which is scalar too), 3x slower on random signs.
 template <typename S>
-void Activate(Activation act, const S* z, S* a, Eigen::Index n) {
+void ScaleNonPositive(const S* __restrict z, S* __restrict d, Eigen::Index n, S slope) {
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const S f = z[i] > S(0) ? S(1) : slope;
+    d[i] = d[i] * f;
+  }
+}
+
+// a = act(z), elementwise over n values: ReLU and leaky ReLU as vectorizable loops, softplus and
+// SiLU through Eigen's vectorized exp.
+template <typename S>
+void Activate(Activation act, const S* __restrict z, S* __restrict a, Eigen::Index n) {
   using Array = Eigen::Array<S, Eigen::Dynamic, 1>;
   const Eigen::Map<const Array> zm(z, n);
   Eigen::Map<Array> am(a, n);
@@ -44,7 +55,8 @@ void Activate(Activation act, const S* z, S* a, Eigen::Index n) {
       for (Eigen::Index i = 0; i < n; ++i) a[i] = z[i] > S(0) ? z[i] : S(0);
       break;
     case Activation::kLeakyRelu:
-      for (Eigen::Index i = 0; i < n; ++i) a[i] = z[i] > S(0) ? z[i] : S(kLeakySlope) * z[i];
+      std::copy(z, z + n, a);
+      ScaleNonPositive(z, a, n, S(kLeakySlope));
       break;
     // max(z, 0) + log1p(exp(-|z|)): no overflow for large |z|.
     case Activation::kSoftplus: am = zm.max(S(0)) + (-zm.abs()).exp().log1p(); break;
@@ -56,7 +68,7 @@ void Activate(Activation act, const S* z, S* a, Eigen::Index n) {
 
 // d *= act'(z), elementwise over n values.
 template <typename S>
-void ActivationBackward(Activation act, const S* z, S* d, Eigen::Index n) {
+void ActivationBackward(Activation act, const S* __restrict z, S* __restrict d, Eigen::Index n) {
   using Array = Eigen::Array<S, Eigen::Dynamic, 1>;
   const Eigen::Map<const Array> zm(z, n);
   Eigen::Map<Array> dm(d, n);
@@ -64,9 +76,7 @@ void ActivationBackward(Activation act, const S* z, S* d, Eigen::Index n) {
     case Activation::kRelu:
       for (Eigen::Index i = 0; i < n; ++i) d[i] = z[i] > S(0) ? d[i] : S(0);
       break;
-    case Activation::kLeakyRelu:
-      for (Eigen::Index i = 0; i < n; ++i) d[i] = z[i] > S(0) ? d[i] : S(kLeakySlope) * d[i];
-      break;
+    case Activation::kLeakyRelu: ScaleNonPositive(z, d, n, S(kLeakySlope)); break;
     case Activation::kSoftplus: dm = dm / (S(1) + (-zm).exp()); break;
     case Activation::kSilu: {
       // d/dz z s(z) = s (1 + z (1 - s)); s = 1 / (1 + exp(-z)) in [0, 1], finite for every z.
@@ -283,7 +293,7 @@ void NeuralModel::Evaluate(const std::int32_t* texel, const float* wi, const flo
   {
     NeuralNet::Workspace ws;
     Eigen::MatrixXf X;
-#pragma omp for schedule(static)
+#pragma omp for schedule(dynamic, 1)
     for (Eigen::Index c = 0; c < chunks; ++c) {
       const Eigen::Index begin = c * kChunk, count = std::min(kChunk, n - begin);
       X.resize(latent + E, count);
@@ -412,12 +422,13 @@ void NeuralTrainer::ComputeBlockGradients(int first, int count, std::vector<Bloc
   const int L = o_.latent, E = o_.encoding.Width(), C = samples_.channels;
   const NeuralNet& net = model_.net;
   // OpenMP over blocks only: inside a parallel region Eigen runs its products on the calling
-  // thread, and each block's arithmetic is the same whichever thread computes it.
+  // thread, and each block's arithmetic is the same whichever thread computes it, so the blocks
+  // are handed out dynamically (a thread the OS holds back does not hold up the others).
 #pragma omp parallel
   {
     NeuralNet::Workspace ws;
     Eigen::MatrixXf X, dY, dX;
-#pragma omp for schedule(static)
+#pragma omp for schedule(dynamic, 1)
     for (int k = 0; k < count; ++k) {
       const int begin = (first + k) * o_.block, nb = std::min(o_.block, o_.batch - begin);
       BlockGradient& g = (*out)[k];
