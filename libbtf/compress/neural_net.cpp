@@ -44,9 +44,10 @@ void ScaleNonPositive(const S* __restrict z, S* __restrict d, Eigen::Index n, S 
 }
 
 // a = act(z), elementwise over n values: ReLU and leaky ReLU as vectorizable loops, softplus and
-// SiLU through Eigen's vectorized exp.
+// SiLU through Eigen's vectorized exp. SiLU keeps sigmoid(z) in sig (n values) for the backward
+// pass, which then needs no exp.
 template <typename S>
-void Activate(Activation act, const S* __restrict z, S* __restrict a, Eigen::Index n) {
+void Activate(Activation act, const S* __restrict z, S* __restrict a, S* __restrict sig, Eigen::Index n) {
   using Array = Eigen::Array<S, Eigen::Dynamic, 1>;
   const Eigen::Map<const Array> zm(z, n);
   Eigen::Map<Array> am(a, n);
@@ -61,14 +62,20 @@ void Activate(Activation act, const S* __restrict z, S* __restrict a, Eigen::Ind
     // max(z, 0) + log1p(exp(-|z|)): no overflow for large |z|.
     case Activation::kSoftplus: am = zm.max(S(0)) + (-zm.abs()).exp().log1p(); break;
     // z sigmoid(z) with sigmoid = 1 / (1 + exp(-z)): exp overflows to inf for z < -88 (float),
-    // giving z / inf = -0, the limit.
-    case Activation::kSilu: am = zm / (S(1) + (-zm).exp()); break;
+    // giving sigmoid 0 and z * 0 = -0, the limit.
+    case Activation::kSilu: {
+      Eigen::Map<Array> sm(sig, n);
+      sm = S(1) / (S(1) + (-zm).exp());
+      am = zm * sm;
+      break;
+    }
   }
 }
 
-// d *= act'(z), elementwise over n values.
+// d *= act'(z), elementwise over n values (sig: what Activate kept).
 template <typename S>
-void ActivationBackward(Activation act, const S* __restrict z, S* __restrict d, Eigen::Index n) {
+void ActivationBackward(Activation act, const S* __restrict z, const S* __restrict sig, S* __restrict d,
+                        Eigen::Index n) {
   using Array = Eigen::Array<S, Eigen::Dynamic, 1>;
   const Eigen::Map<const Array> zm(z, n);
   Eigen::Map<Array> dm(d, n);
@@ -79,9 +86,9 @@ void ActivationBackward(Activation act, const S* __restrict z, S* __restrict d, 
     case Activation::kLeakyRelu: ScaleNonPositive(z, d, n, S(kLeakySlope)); break;
     case Activation::kSoftplus: dm = dm / (S(1) + (-zm).exp()); break;
     case Activation::kSilu: {
-      // d/dz z s(z) = s (1 + z (1 - s)); s = 1 / (1 + exp(-z)) in [0, 1], finite for every z.
-      const Array s = S(1) / (S(1) + (-zm).exp());
-      dm = dm * s * (S(1) + zm * (S(1) - s));
+      // d/dz z s(z) = s (1 + z (1 - s)); s in [0, 1], finite for every z.
+      const Eigen::Map<const Array> sm(sig, n);
+      dm = dm * sm * (S(1) + zm * (S(1) - sm));
       break;
     }
   }
@@ -108,11 +115,11 @@ void EncodeDirections(const DirectionEncoding& e, const float* wi, const float* 
   out[3] = wo[1];
   int k = 4;
   if (e.half_vector) {
-    const double h[3] = {double(wi[0]) + wo[0], double(wi[1]) + wo[1], double(wi[2]) + wo[2]};
-    const double norm = std::sqrt(h[0] * h[0] + h[1] * h[1] + h[2] * h[2]);
-    const double s = norm > 1e-12 ? 1 / norm : 0;  // wi = -wo: no half vector, (0, 0)
-    out[k++] = float(h[0] * s);
-    out[k++] = float(h[1] * s);
+    const float h[3] = {wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]};
+    const float norm2 = h[0] * h[0] + h[1] * h[1] + h[2] * h[2];
+    const float s = norm2 > 1e-24f ? 1 / std::sqrt(norm2) : 0.f;  // wi = -wo: no half vector, (0, 0)
+    out[k++] = h[0] * s;
+    out[k++] = h[1] * s;
   }
   for (int f = 0; f < e.fourier; ++f)
     for (int b = 0; b < 4; ++b) {
@@ -173,6 +180,7 @@ const typename BasicNeuralNet<Scalar>::Matrix& BasicNeuralNet<Scalar>::Forward(c
   const int L = layers();
   ws.z.resize(L);
   ws.a.resize(L);
+  ws.sig.resize(L);
   for (int l = 0; l < L; ++l) {
     Matrix& z = ws.z[l];
     if (l == 0)
@@ -182,7 +190,12 @@ const typename BasicNeuralNet<Scalar>::Matrix& BasicNeuralNet<Scalar>::Forward(c
     z.colwise() += bias(l);
     if (l + 1 < L) {
       ws.a[l].resize(z.rows(), z.cols());
-      Activate(shape_.activation, z.data(), ws.a[l].data(), z.size());
+      Scalar* sig = nullptr;
+      if (shape_.activation == Activation::kSilu) {
+        ws.sig[l].resize(z.rows(), z.cols());
+        sig = ws.sig[l].data();
+      }
+      Activate(shape_.activation, z.data(), ws.a[l].data(), sig, z.size());
     }
   }
   return ws.z.back();
@@ -207,7 +220,8 @@ void BasicNeuralNet<Scalar>::Backward(const Eigen::Ref<const Matrix>& X, const E
     if (l > 0) {
       ws.next.noalias() = W.transpose() * ws.delta;
       ws.delta.swap(ws.next);
-      ActivationBackward(shape_.activation, ws.z[l - 1].data(), ws.delta.data(), ws.delta.size());
+      ActivationBackward(shape_.activation, ws.z[l - 1].data(), ws.sig[l - 1].data(), ws.delta.data(),
+                         ws.delta.size());
     } else if (dX) {
       dX->noalias() = W.transpose() * ws.delta;
     }
@@ -415,6 +429,9 @@ double NeuralTrainer::LearningRate(std::int64_t s, double initial) const {
   return low + 0.5 * (initial - low) * (1 + std::cos(std::numbers::pi * std::min(t, 1.0)));
 }
 
+// Samples ahead whose data the gather loop asks the cache for.
+constexpr int kFetchAhead = 16;
+
 void NeuralTrainer::ComputeBlockGradients(int first, int count, std::vector<BlockGradient>* out) const {
   BTF_CHECK(first >= 0 && count >= 0 && first + count <= blocks_per_step());
   StepSamples(step_, &batch_);
@@ -436,6 +453,16 @@ void NeuralTrainer::ComputeBlockGradients(int first, int count, std::vector<Bloc
       g.texels.resize(nb);
       X.resize(L + E, nb);
       for (int j = 0; j < nb; ++j) {
+        // The batch visits samples (and their texels' latents) in random order: fetch ahead.
+        if (j + kFetchAhead < nb) {
+          const std::int64_t p = batch_[begin + j + kFetchAhead];
+          __builtin_prefetch(&samples_.texel[p]);
+          __builtin_prefetch(&samples_.wi[3 * p]);
+          __builtin_prefetch(&samples_.wo[3 * p]);
+          __builtin_prefetch(&samples_.target[std::size_t(p) * C]);
+        }
+        if (j + kFetchAhead / 2 < nb)
+          __builtin_prefetch(model_.latents.col(samples_.texel[batch_[begin + j + kFetchAhead / 2]]).data());
         const std::int64_t i = batch_[begin + j];
         g.texels[j] = samples_.texel[i];
         X.col(j).head(L) = model_.latents.col(g.texels[j]);

@@ -65,6 +65,7 @@ class BasicNeuralNet {
   // What Forward keeps for Backward (pre-activations and activations per layer). One per thread.
   struct Workspace {
     std::vector<Matrix> z, a;  // per layer: z_l = W_l a_{l-1} + b_l, a_l = act(z_l) (last: a = z)
+    std::vector<Matrix> sig;   // SiLU: sigmoid(z_l) per hidden layer, for the backward pass
     Matrix delta, next;        // backward scratch
   };
 

@@ -161,6 +161,16 @@ TEST(NeuralAdam, DenseAndLazyUpdatesAreAdamWrittenOut) {
   EXPECT_EQ(lazy.updates(2), 1);
 }
 
+// Trains on one thread while in scope. The results are the same with any number of threads
+// (SameBitsForOneAndTwoThreadsAndForBlocksComputedInParts), and a team of two waits at every
+// step for a thread that ctest -j's other tests keep off the CPU: the lobe fit took 6 s instead
+// of 1.5 s on a loaded 2-core machine.
+struct OneThread {
+  int saved = omp_get_max_threads();
+  OneThread() { omp_set_num_threads(1); }
+  ~OneThread() { omp_set_num_threads(saved); }
+};
+
 NeuralTrainOptions SmallOptions() {
   NeuralTrainOptions o;
   o.batch = 1024;
@@ -231,13 +241,8 @@ TEST(NeuralTrainer, FitsSyntheticLobesOnHeldOutDirections) {
   o.encoding.half_vector = true;
   o.activation = Activation::kSilu;
   NeuralTrainSummary summary;
-  // One thread: the result is the same with any number (the next test), and a team of two
-  // waits at every step for a thread that ctest -j's other tests keep off the CPU (6 s
-  // instead of 1.5 s on a loaded 2-core machine).
-  const int saved = omp_get_max_threads();
-  omp_set_num_threads(1);
+  const OneThread one;
   const NeuralModel m = TrainNeural(train, o, {}, &summary);
-  omp_set_num_threads(saved);
   const double spread = test::LobeSpread(train), rmse = test::LobeRmse(m, held);
   RecordProperty("held_out_rmse", fmt::format("{:.4f}", rmse));
   EXPECT_GT(spread, 0.8);
@@ -371,6 +376,7 @@ TEST(NeuralTrainer, GrazingDirectionsGiveFiniteResults) {
     else s.wo.insert(s.wo.end(), {0.f, 0.f, 1.f});
     for (int c = 0; c < 3; ++c) s.target.push_back(float(i % 3 ? std::log(1e-3) : std::log(1e4)));
   }
+  const OneThread one;
   for (const Activation act : kActivations) {
     NeuralTrainOptions o = SmallOptions();
     o.batch = 128;
