@@ -300,6 +300,9 @@ void NeuralModel::Evaluate(const std::int32_t* texel, const float* wi, const flo
                            Eigen::MatrixXf* out) const {
   const int E = encoding.Width(), C = net.shape().outputs;
   BTF_CHECK(net.shape().inputs == latent + E && latents.rows() == latent);
+  for (Eigen::Index i = 0; i < n; ++i)
+    if (texel[i] < 0 || texel[i] >= latents.cols())
+      ThrowBadInput("neural model: sample {} asks for texel {} (of {})", i, texel[i], latents.cols());
   out->resize(C, n);
   constexpr Eigen::Index kChunk = 1024;
   const Eigen::Index chunks = (n + kChunk - 1) / kChunk;

@@ -8,8 +8,10 @@
 // W (out x in) * X (in x batch). Training splits every minibatch into blocks of a fixed size whose
 // gradients are computed independently (OpenMP over blocks, Eigen single-threaded inside each)
 // and summed in block order: the result depends on the seed alone, not on the thread count, and
-// a caller may compute some of a step's blocks elsewhere (another MPI rank) and hand all of them,
-// in order, to ApplyStep.
+// a caller may compute some of a step's blocks elsewhere and hand all of them, in order, to
+// ApplyStep. With MPI: every rank holds the samples (or the ones its blocks draw) and the whole
+// model, computes its share of the blocks (NeuralTrainer::ComputeBlockGradients), gathers every
+// rank's blocks and applies the step with all of them, so the replicas stay bit-identical.
 #include <cstdint>
 #include <functional>
 #include <span>
@@ -161,6 +163,7 @@ struct NeuralModel {
   Eigen::MatrixXf latents;  // latent x texels: texel t's latent is column t
   NeuralNet net;
   // out (channels x n, column-major): the decoder's values for n (texel, wi, wo), log domain.
+  // Throws btf::Error (bad input) for a texel out of range; directions as in NeuralSamples.
   void Evaluate(const std::int32_t* texel, const float* wi, const float* wo, Eigen::Index n,
                 Eigen::MatrixXf* out) const;
 };
