@@ -326,8 +326,8 @@ void NeuralModel::Evaluate(const std::int32_t* texel, const float* wi, const flo
 
 void NeuralTrainOptions::Check() const {
   BTF_CHECK_OPTION(latent >= 0 && latent <= 256, "latent", latent);
+  encoding.Check();  // before its Width() is used
   NeuralNetShape{latent + encoding.Width(), hidden, 1, activation}.Check();
-  encoding.Check();
   adam.Check();
   BTF_CHECK_OPTION(batch >= 1 && batch <= (1 << 24), "batch", batch);
   BTF_CHECK_OPTION(block >= 1 && block <= batch, "block", block);
