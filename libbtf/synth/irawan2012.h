@@ -33,6 +33,8 @@ double SpineRadius(double u, double umax, double kappa, double w, double l);
 // von Mises density on the circle, vM(c; b) = e^{b c} / (2 pi I0(|b|)), evaluated in scaled form
 // (no overflow for large |b|).
 double VonMises(double cos_x, double b);
+// 1 / (2 pi e^{-|b|} I0(|b|)): the part of VonMises that depends on b alone (cached per kernel).
+double VonMisesNorm(double b);
 
 // The smooth cutoff 3x^2 - 2x^3 of x clamped to [0, 1]: the highlight's fade towards umax, as the
 // model evaluates it and N_spec's quadrature integrates it.
