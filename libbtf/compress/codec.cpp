@@ -1,6 +1,7 @@
 #include "libbtf/compress/codec.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 #include <Eigen/Core>
@@ -47,7 +48,34 @@ void ClusterTexelLoop(const std::vector<std::int32_t>& cluster_of, const std::ve
     }
   }
 }
+
+std::array<float, 3> ToFloat3(const Vec3& d) {
+  const Vec3 n = d.normalized();
+  return {float(n.x()), float(n.y()), float(n.z())};
 }
+
+// Texel taps (texel, weight) of texture coordinates uv: continuous texel coordinates (texel
+// centres at integers), wrapped.
+std::vector<std::pair<std::size_t, double>> UvTaps(const Vec2& uv, int width, int height, UvFilter filter) {
+  std::vector<std::pair<std::size_t, double>> taps;
+  const double fx = uv.x() * width - 0.5, fy = (1.0 - uv.y()) * height - 0.5;
+  auto wrap = [](long long i, int n) { return static_cast<int>(((i % n) + n) % n); };
+  if (filter == UvFilter::kNearest) {
+    const int x = wrap(std::llround(fx), width), y = wrap(std::llround(fy), height);
+    taps.emplace_back(std::size_t(y) * width + x, 1.0);
+    return taps;
+  }
+  const double x0 = std::floor(fx), y0 = std::floor(fy), ax = fx - x0, ay = fy - y0;
+  for (int dy = 0; dy < 2; ++dy)
+    for (int dx = 0; dx < 2; ++dx) {
+      const double w = (dx ? ax : 1 - ax) * (dy ? ay : 1 - ay);
+      if (w <= 0) continue;
+      const int x = wrap(static_cast<long long>(x0) + dx, width), y = wrap(static_cast<long long>(y0) + dy, height);
+      taps.emplace_back(std::size_t(y) * width + x, w);
+    }
+  return taps;
+}
+}  // namespace
 
 std::string MethodName(CodecMethod method) {
   switch (method) {
@@ -56,6 +84,7 @@ std::string MethodName(CodecMethod method) {
     case CodecMethod::kFmf: return "fmf";
     case CodecMethod::kDfmf: return "dfmf";
     case CodecMethod::kLpcaTensor: return "lpca-tensor";
+    case CodecMethod::kNeural: return "neural";
   }
   return "unknown";
 }
@@ -66,7 +95,8 @@ CodecMethod ParseMethod(const std::string& name) {
   if (name == "fmf") return CodecMethod::kFmf;
   if (name == "dfmf") return CodecMethod::kDfmf;
   if (name == "lpca-tensor") return CodecMethod::kLpcaTensor;
-  ThrowUsage("unknown compression method '{}' (use pca-view, lpca, lpca-tensor, fmf or dfmf)", name);
+  if (name == "neural") return CodecMethod::kNeural;
+  ThrowUsage("unknown compression method '{}' (use pca-view, lpca, lpca-tensor, fmf, dfmf or neural)", name);
 }
 
 std::string StorageName(CodecStorage storage) { return storage == CodecStorage::kHalf ? "half" : "float"; }
@@ -94,6 +124,7 @@ Codec CodecBuilder::Make(CodecMethod method, Sampling views, Sampling lights, in
 std::uint64_t Codec::StoredBytes() const {
   std::uint64_t floats = 0, ints = 0;
   if (method_ == CodecMethod::kLpcaTensor) return tensor_.StoredBytes();
+  if (method_ == CodecMethod::kNeural) return neural_.StoredBytes();
   if (method_ == CodecMethod::kPcaView) {
     for (const auto& s : slots_) floats += s.mean.size() + s.basis.size() + s.weights.size();
   } else if (IsFullMatrixFactorisation(method_)) {
@@ -112,6 +143,12 @@ std::uint64_t Codec::RawBytes(int bytes_per_value) const {
 void Codec::SampleTransformed(int view, int light, std::size_t texel, float* out) const {
   if (IsFullMatrixFactorisation(method_)) return fmf_.Sample(view, light, texel, out);
   if (method_ == CodecMethod::kLpcaTensor) return tensor_.Sample(view, light, texel, out);
+  if (method_ == CodecMethod::kNeural) {
+    const auto wi = ToFloat3(lights_[light]), wo = ToFloat3(views_[view]);
+    return neural_.Evaluate(
+        1, [&](Eigen::Index) { return neural_.latents.col(Eigen::Index(texel)).data(); },
+        [&](Eigen::Index) { return wi.data(); }, [&](Eigen::Index) { return wo.data(); }, out);
+  }
   const int C = channels_;
   if (method_ == CodecMethod::kPcaView) {
     const PcaViewSlot& s = slots_[static_cast<std::size_t>(view)];
@@ -156,6 +193,14 @@ void Codec::DecodeViewSlot(int view, float* out) const {
     }
   } else if (IsFullMatrixFactorisation(method_)) {
     fmf_.DecodeViewSlot(view, out);
+  } else if (method_ == CodecMethod::kNeural) {
+    std::vector<float> wi, wo;  // per light
+    for (int l = 0; l < L; ++l) {
+      const auto i3 = ToFloat3(lights_[l]), o3 = ToFloat3(views_[view]);
+      wi.insert(wi.end(), i3.begin(), i3.end());
+      wo.insert(wo.end(), o3.begin(), o3.end());
+    }
+    neural_.DecodeImages(L, wi.data(), wo.data(), out);
   } else if (method_ == CodecMethod::kLpcaTensor) {
     // The view's rows of every cluster function (K (1 + c) L C floats), then LPCA's texel loop.
     const LpcaTensorModel& m = tensor_;
@@ -195,8 +240,11 @@ void Codec::DecodeImage(int view, int light, float* out) const {
     }
     if (value_map_.kind != ValueTransform::kNone)
       for (std::size_t i = 0; i < D; ++i) out[i] = Untransform(out[i]);
-  } else if (IsFullMatrixFactorisation(method_)) {
-    fmf_.DecodeImage(view, light, out);
+  } else if (IsFullMatrixFactorisation(method_) || method_ == CodecMethod::kNeural) {
+    if (method_ == CodecMethod::kNeural)
+      neural_.DecodeImages(1, ToFloat3(lights_[light]).data(), ToFloat3(views_[view]).data(), out);
+    else
+      fmf_.DecodeImage(view, light, out);
     if (value_map_.kind != ValueTransform::kNone)
       for (std::size_t i = 0; i < D; ++i) out[i] = Untransform(out[i]);
   } else if (method_ == CodecMethod::kLpcaTensor) {
@@ -246,6 +294,16 @@ std::vector<float> Codec::DecodeAbrdf(int y, int x) const {
   } else if (method_ == CodecMethod::kLpcaTensor) {
     tensor_.DecodeAbrdf(t, out.data());
     for (auto& v : out) v = Untransform(v);
+  } else if (method_ == CodecMethod::kNeural) {  // one batch: every (view, light) pair, [v][l][ch]
+    const int L = num_lights();
+    std::vector<std::array<float, 3>> wi(static_cast<std::size_t>(L)), wo(static_cast<std::size_t>(num_views()));
+    for (int l = 0; l < L; ++l) wi[std::size_t(l)] = ToFloat3(lights_[l]);
+    for (int v = 0; v < num_views(); ++v) wo[std::size_t(v)] = ToFloat3(views_[v]);
+    neural_.Evaluate(
+        Eigen::Index(num_views()) * L, [&](Eigen::Index) { return neural_.latents.col(Eigen::Index(t)).data(); },
+        [&](Eigen::Index i) { return wi[std::size_t(i % L)].data(); },
+        [&](Eigen::Index i) { return wo[std::size_t(i / L)].data(); }, out.data());
+    for (auto& v : out) v = Untransform(v);
   } else {
     for (int v = 0; v < num_views(); ++v)
       for (int l = 0; l < num_lights(); ++l) {
@@ -267,40 +325,37 @@ Dataset Codec::DecodeAll() const {
 void Codec::Value(const Vec2& uv, const Vec3& wi, const Vec3& wo, float* out, UvFilter filter) const {
   if (!uv.allFinite() || !wi.allFinite() || !wo.allFinite() || wi.norm() == 0 || wo.norm() == 0)
     ThrowUsage("Codec::Value needs finite uv and non-zero finite directions");
+  const auto taps = UvTaps(uv, width_, height_, filter);
+  if (method_ == CodecMethod::kNeural) return NeuralValue(taps, wi, wo, out);
   const Interpolant iv = views_.Barycentric(wo), il = lights_.Barycentric(wi);
-  // Texel taps: continuous texel coordinates (texel centers at integers), wrapped.
-  struct Tap {
-    std::size_t texel;
-    double weight;
-  };
-  std::vector<Tap> taps;
-  const double fx = uv.x() * width_ - 0.5, fy = (1.0 - uv.y()) * height_ - 0.5;
-  auto wrap = [](long long i, int n) { return static_cast<int>(((i % n) + n) % n); };
-  if (filter == UvFilter::kNearest) {
-    const int x = wrap(std::llround(fx), width_), y = wrap(std::llround(fy), height_);
-    taps.push_back({std::size_t(y) * width_ + x, 1.0});
-  } else {
-    const double x0 = std::floor(fx), y0 = std::floor(fy), ax = fx - x0, ay = fy - y0;
-    for (int dy = 0; dy < 2; ++dy)
-      for (int dx = 0; dx < 2; ++dx) {
-        const double w = (dx ? ax : 1 - ax) * (dy ? ay : 1 - ay);
-        if (w <= 0) continue;
-        const int x = wrap(static_cast<long long>(x0) + dx, width_), y = wrap(static_cast<long long>(y0) + dy, height_);
-        taps.push_back({std::size_t(y) * width_ + x, w});
-      }
-  }
   std::vector<double> acc(static_cast<std::size_t>(channels_), 0.0);
   std::vector<float> s(static_cast<std::size_t>(channels_));
-  for (const Tap& tap : taps)
+  for (const auto& [texel, weight] : taps)
     for (int a = 0; a < iv.count; ++a)
       for (int b = 0; b < il.count; ++b) {
-        const double w = tap.weight * iv.weight[static_cast<std::size_t>(a)] * il.weight[static_cast<std::size_t>(b)];
+        const double w = weight * iv.weight[static_cast<std::size_t>(a)] * il.weight[static_cast<std::size_t>(b)];
         if (w <= 0) continue;
-        SampleTransformed(iv.index[static_cast<std::size_t>(a)], il.index[static_cast<std::size_t>(b)], tap.texel,
+        SampleTransformed(iv.index[static_cast<std::size_t>(a)], il.index[static_cast<std::size_t>(b)], texel,
                           s.data());
         for (int ch = 0; ch < channels_; ++ch) acc[static_cast<std::size_t>(ch)] += w * Untransform(s[static_cast<std::size_t>(ch)]);
       }
   for (int ch = 0; ch < channels_; ++ch) out[ch] = static_cast<float>(acc[static_cast<std::size_t>(ch)]);
+}
+
+void Codec::NeuralValue(const std::vector<std::pair<std::size_t, double>>& taps, const Vec3& wi, const Vec3& wo,
+                        float* out) const {
+  const NeuralCodecModel& m = neural_;
+  std::vector<float> z(static_cast<std::size_t>(m.latent), 0.f);
+  for (int j = 0; j < m.latent; ++j) {
+    double v = 0;
+    for (const auto& [texel, weight] : taps) v += weight * m.latents(j, Eigen::Index(texel));
+    z[static_cast<std::size_t>(j)] = static_cast<float>(v);
+  }
+  const auto i3 = ToFloat3(wi), o3 = ToFloat3(wo);
+  m.Evaluate(
+      1, [&](Eigen::Index) { return z.data(); }, [&](Eigen::Index) { return i3.data(); },
+      [&](Eigen::Index) { return o3.data(); }, out);
+  for (int ch = 0; ch < channels_; ++ch) out[ch] = Untransform(out[ch]);
 }
 
 nlohmann::json Codec::Describe() const {
@@ -322,11 +377,19 @@ nlohmann::json Codec::Describe() const {
     j["components"] = tensor_.components;
     j["factor_terms"] = tensor_.terms();
     j["quant_bits"] = tensor_.bits;
+  } else if (method_ == CodecMethod::kNeural) {
+    j["latent"] = neural_.latent;
+    j["hidden"] = neural_.net.shape().hidden;
+    j["activation"] = std::string(ActivationName(neural_.net.shape().activation));
+    j["encoding"] = {{"half_vector", neural_.encoding.half_vector}, {"fourier", neural_.encoding.fourier}};
+    j["decoder_parameters"] = neural_.net.parameter_count();
   } else {
     j["clusters"] = lpca_.clusters;
     j["components"] = lpca_.components;
   }
-  j["storage"] = method_ == CodecMethod::kLpcaTensor ? fmt::format("uint{}", tensor_.bits) : StorageName(storage_);
+  j["storage"] = method_ == CodecMethod::kLpcaTensor ? fmt::format("uint{}", tensor_.bits)
+                 : method_ == CodecMethod::kNeural     ? LatentStorageName(neural_.storage)
+                                                       : StorageName(storage_);
   j["stored_bytes"] = StoredBytes();
   j["raw_float32_bytes"] = RawBytes(4);
   j["raw_half_bytes"] = RawBytes(2);

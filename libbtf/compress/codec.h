@@ -1,7 +1,7 @@
 #pragma once
 // BTF codecs as stored: per-view PCA (Sattler et al. 2003), local PCA (Mueller et al. 2003, as
 // described in Schneider 2004 section 3), LPCA with factorised Eigen-ABRDFs (lpca_tensor.h) and
-// Bonn's full-matrix factorisations FMF / DFMF (fmf_codec.h); their file format "libbtf-codec"
+// Bonn's full-matrix factorisations FMF / DFMF (fmf_codec.h), the neural codec (neural_codec.h); their file format "libbtf-codec"
 // (docs/format.md) and decoders. The bottom layer of compress/: the compressors
 // (compress.h) fill a Codec through CodecBuilder; nothing here calls them.
 //
@@ -19,6 +19,7 @@
 
 #include "libbtf/compress/fmf_codec.h"
 #include "libbtf/compress/lpca_tensor.h"
+#include "libbtf/compress/neural_codec.h"
 #include "libbtf/compress/value_transform.h"
 #include "libbtf/core/atomic_file.h"
 #include "libbtf/core/dataset.h"
@@ -30,10 +31,12 @@ namespace btf {
 
 inline constexpr const char* kCodecFormat = "libbtf-codec";
 inline constexpr const char* kCodecFormatVersion = "1.2.0";
+// Written by neural codecs only (the first version with them); every other codec stays 1.2.0.
+inline constexpr const char* kNeuralCodecFormatVersion = "1.3.0";
 inline constexpr int kCodecFormatMajor = 1;
 
-enum class CodecMethod { kPcaView, kLpca, kFmf, kDfmf, kLpcaTensor };
-// "pca-view" / "lpca" / "fmf" / "dfmf" / "lpca-tensor".
+enum class CodecMethod { kPcaView, kLpca, kFmf, kDfmf, kLpcaTensor, kNeural };
+// "pca-view" / "lpca" / "fmf" / "dfmf" / "lpca-tensor" / "neural".
 std::string MethodName(CodecMethod method);
 // Throws btf::Error (usage) for unknown names.
 CodecMethod ParseMethod(const std::string& name);
@@ -93,6 +96,7 @@ class Codec {
   const LpcaModel& lpca() const { return lpca_; }
   const FmfModel& fmf() const { return fmf_; }
   const LpcaTensorModel& lpca_tensor() const { return tensor_; }
+  const NeuralCodecModel& neural() const { return neural_; }
   // Options and summary of the compression that made it (JSON, stored in the file).
   const nlohmann::json& provenance() const { return provenance_; }
 
@@ -110,7 +114,8 @@ class Codec {
   std::vector<float> DecodeAbrdf(int y, int x) const;         // V x L x C (Dataset::Abrdf layout)
   // Value at texture coordinates uv (wrapping: the tile repeats), light direction wi and view
   // direction wo (both leaving the surface): barycentric over the three nearest sampled view and
-  // light directions (9 pairs), nearest or bilinear in uv. out: C floats.
+  // light directions (9 pairs), nearest or bilinear in uv. neural: the decoder at (wi, wo)
+  // themselves (normalised), its latent nearest or bilinear in uv. out: C floats.
   void Value(const Vec2& uv, const Vec3& wi, const Vec3& wo, float* out, UvFilter filter = UvFilter::kBilinear) const;
 
   // btf-info's summary.
@@ -121,6 +126,9 @@ class Codec {
   float Untransform(float y) const { return value_map_.Inverse(y); }
   // Value of sampled (view, light) at texel t (row-major index), transformed domain, C floats.
   void SampleTransformed(int view, int light, std::size_t texel, float* out) const;
+  // neural: Value's decoder at (wi, wo) with the texel taps' latents mixed.
+  void NeuralValue(const std::vector<std::pair<std::size_t, double>>& taps, const Vec3& wi, const Vec3& wo,
+                   float* out) const;
 
   CodecMethod method_ = CodecMethod::kPcaView;
   Sampling views_, lights_;
@@ -132,6 +140,7 @@ class Codec {
   LpcaModel lpca_;
   FmfModel fmf_;
   LpcaTensorModel tensor_;
+  NeuralCodecModel neural_;
   nlohmann::json provenance_ = nlohmann::json::object();
 };
 
@@ -144,11 +153,13 @@ class CodecBuilder {
   static LpcaModel& lpca(Codec& c) { return c.lpca_; }
   static FmfModel& fmf(Codec& c) { return c.fmf_; }
   static LpcaTensorModel& lpca_tensor(Codec& c) { return c.tensor_; }
+  static NeuralCodecModel& neural(Codec& c) { return c.neural_; }
   static nlohmann::json& provenance(Codec& c) { return c.provenance_; }
   static CodecStorage& storage(Codec& c) { return c.storage_; }
 };
 
-// Codec files ("libbtf-codec" 1.2.0, docs/format.md). Written atomically.
+// Codec files ("libbtf-codec" 1.2.0; neural codecs 1.3.0, the first version that has them;
+// docs/format.md). Written atomically.
 void WriteCodec(const std::filesystem::path& path, const Codec& codec, const std::string& creator = "libbtf");
 // Writes into `out`'s temporary and commits it (for callers that reserved the output early).
 void WriteCodec(AtomicOutput& out, const Codec& codec, const std::string& creator = "libbtf");

@@ -1,4 +1,4 @@
-// Codec file "libbtf-codec" version 1.2.0 (normative description: docs/format.md).
+// Codec file "libbtf-codec" version 1.2.0, neural codecs 1.3.0 (normative description: docs/format.md).
 #include <cmath>
 #include <sstream>
 
@@ -68,7 +68,8 @@ CodecFileWriter::CodecFileWriter(AtomicOutput& out, const Codec& c, const std::s
       W_(c.width()),
       C_(c.channels()) {
   h5::File& f = file_;
-  f.WriteFormatHeader(kCodecFormat, kCodecFormatVersion, creator);
+  f.WriteFormatHeader(kCodecFormat, c.method() == CodecMethod::kNeural ? kNeuralCodecFormatVersion : kCodecFormatVersion,
+                      creator);
   f.WriteString("/provenance", c.info().provenance.dump());
   f.CreateGroup("/codec");
   f.SetAttr("/codec", "method", MethodName(c.method()));
@@ -112,6 +113,8 @@ void CodecFileWriter::Finish(const Codec& c, int slots_written) {
     WriteFmfModel(f, c.fmf(), c.num_views(), c.height(), c.width());
   } else if (c.method() == CodecMethod::kLpcaTensor) {
     WriteLpcaTensorModel(f, c.lpca_tensor(), c.height(), c.width());
+  } else if (c.method() == CodecMethod::kNeural) {
+    WriteNeuralModel(f, c.neural(), c.height(), c.width());
   } else {
     const LpcaModel& m = c.lpca();
     const hsize_t K = m.clusters, k = m.components;
@@ -137,7 +140,7 @@ Codec ReadCodec(const std::filesystem::path& path) {
   if (!f.Exists("/codec")) ThrowBadInput("'{}': required group '/codec' is missing", path.string());
   const CodecMethod method = [&] {
     const std::string m = f.GetString("/codec", "method");
-    if (m != "pca-view" && m != "lpca" && m != "fmf" && m != "dfmf" && m != "lpca-tensor")
+    if (m != "pca-view" && m != "lpca" && m != "fmf" && m != "dfmf" && m != "lpca-tensor" && m != "neural")
       ThrowBadInput("'{}': unknown codec method '{}'", path.string(), m);
     return ParseMethod(m);
   }();
@@ -199,6 +202,8 @@ Codec ReadCodec(const std::filesystem::path& path) {
     CodecBuilder::fmf(c) = ReadFmfModel(f, method == CodecMethod::kDfmf, int(V), int(L), H, W, C);
   } else if (method == CodecMethod::kLpcaTensor) {
     CodecBuilder::lpca_tensor(c) = ReadLpcaTensorModel(f, int(V), int(L), H, W, C);
+  } else if (method == CodecMethod::kNeural) {
+    CodecBuilder::neural(c) = ReadNeuralModel(f, H, W, C);
   } else {
     LpcaModel& m = CodecBuilder::lpca(c);
     const auto K = f.GetInt("/codec/lpca", "clusters"), k = f.GetInt("/codec/lpca", "components");
