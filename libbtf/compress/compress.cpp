@@ -17,12 +17,13 @@ namespace {
 
 // --bytes for the methods that meet it by components: the largest c <= options.components whose
 // codec cannot exceed the budget (MethodEntry::bytes_at).
+// neural: the latent width (at most options.neural.latent).
 int ComponentsWithin(const CompressOptions& o, const MethodEntry& method, const SlotSource& in) {
   const double B = double(o.max_bytes), one = method.bytes_at(o, in, 1);
   if (one > B)
     ThrowUsage("--bytes {} is below the smallest {} codec of this input ({:.0f} bytes at 1 component)", o.max_bytes,
                MethodName(o.method), one);
-  int c = o.components;
+  int c = o.method == CodecMethod::kNeural ? o.neural.latent : o.components;
   while (c > 1 && method.bytes_at(o, in, c) > B) --c;
   return c;
 }
@@ -41,6 +42,11 @@ std::uint64_t FullCodecBytes(const CompressSummary& sum, const Codec& codec) {
     const double qb = m.bits / 8.0;
     return static_cast<std::uint64_t>(double(m.terms()) * ((Vf + Lf * Cf) * qb + 16) + T * (m.components * qb + 4) +
                                       double(m.clusters) * (1 + m.components) * 12);
+  }
+  if (codec.method() == CodecMethod::kNeural) {  // the same decoder, latents for every texel
+    const NeuralCodecModel& m = codec.neural();
+    return m.StoredBytes() + static_cast<std::uint64_t>((T - double(m.texels())) * m.latent *
+                                                        (m.storage == LatentStorage::kHalf ? 2 : 1));
   }
   if (codec.method() == CodecMethod::kPcaView) {
     values = Vf * (T * Cf * (1 + cbar) + Lf * cbar);
@@ -106,15 +112,18 @@ CompressSummary CompressAndWrite(const CompressOptions& options, const SlotSourc
   const MethodEntry& method = FindMethod(o.method);
   if (o.max_bytes > 0 && method.bytes_at) {
     const int c = ComponentsWithin(o, method, in);
-    if (c < o.components) rep.Info("--bytes {}: {} components (of at most {})", o.max_bytes, c, o.components);
-    o.components = c;
+    int& width = o.method == CodecMethod::kNeural ? o.neural.latent : o.components;
+    if (c < width) rep.Info("--bytes {}: {} components (of at most {})", o.max_bytes, c, width);
+    width = c;
   }
   const ValueMap transform = o.Transform();
   Codec codec = CodecBuilder::Make(o.method, in.views(), in.lights(), in.height(), in.width(), in.channels(), in.info(),
                                    transform);
   CodecBuilder::storage(codec) = o.storage;
   sum.method = MethodName(o.method);
-  sum.storage = o.method == CodecMethod::kLpcaTensor ? fmt::format("uint{}", o.tensor.quant_bits) : StorageName(o.storage);
+  sum.storage = o.method == CodecMethod::kLpcaTensor ? fmt::format("uint{}", o.tensor.quant_bits)
+                : o.method == CodecMethod::kNeural     ? o.neural.latent_storage
+                                                       : StorageName(o.storage);
   std::optional<CodecFileWriter> writer;
   if (out && method.streams_slots && !ranks.distributed()) writer.emplace(*out, codec, creator);
   const MethodContext ctx{in, o, transform, ranks, rep, writer ? &*writer : nullptr};

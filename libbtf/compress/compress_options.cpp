@@ -37,6 +37,20 @@ void LpcaTensorOptions::Check() const {
   BTF_CHECK_OPTION(growth >= 0 && std::isfinite(growth), "tensor_growth", "must be >= 0");
 }
 
+void NeuralOptions::Check() const {
+  BTF_CHECK_OPTION(latent >= 0 && latent <= 256, "neural_latent", "must be 0..256");
+  BTF_CHECK_OPTION(hidden.size() <= 16, "neural_hidden", "at most 16 layers");
+  for (const int h : hidden) BTF_CHECK_OPTION(h >= 1 && h <= 4096, "neural_hidden", "widths must be 1..4096");
+  BTF_CHECK_OPTION(fourier >= 0 && fourier <= 8, "neural_fourier", "must be 0..8");
+  BTF_CHECK_OPTION(latent_storage == "uint8" || latent_storage == "half", "neural_latent_storage",
+                   "must be uint8 or half");
+  BTF_CHECK_OPTION(samples >= 1 && samples <= (std::int64_t(1) << 31) - 1, "neural_samples", "must be 1..2^31-1");
+  BTF_CHECK_OPTION(steps >= 0 && steps <= 100000000, "neural_steps", "must be 0..1e8");
+  BTF_CHECK_OPTION(epochs > 0 && epochs <= 1e6, "neural_epochs", "must be in (0, 1e6]");
+  BTF_CHECK_OPTION(batch >= 1 && batch <= (1 << 20), "neural_batch", "must be 1..2^20");
+  BTF_CHECK_OPTION(learning_rate > 0 && learning_rate <= 1, "neural_learning_rate", "must be in (0, 1]");
+}
+
 void CompressOptions::Check() const {
   BTF_CHECK_OPTION(components >= 1 && components <= 4096, "components", "must be 1..4096");
   BTF_CHECK_OPTION(clusters >= 1 && clusters <= 65535, "clusters", "must be 1..65535");
@@ -52,12 +66,18 @@ void CompressOptions::Check() const {
                    "lpca-tensor stores quantised codes (--quant-bits), not float or half arrays");
   BTF_CHECK_OPTION(log_epsilon > 0 && std::isfinite(log_epsilon), "log_epsilon", "must be > 0");
   lpca.Check();
+  neural.Check();
+  BTF_CHECK_OPTION(method != CodecMethod::kNeural || (target_error == 0 && retained_energy == 0), "error/energy",
+                   "the neural codec takes --bytes or its own sizes (--neural-latent, --neural-hidden): its error is "
+                   "known only after training");
+  BTF_CHECK_OPTION(method != CodecMethod::kNeural || storage == CodecStorage::kFloat, "storage",
+                   "the neural codec stores its latents as --neural-latent-storage uint8|half and its decoder as float");
   BTF_CHECK_OPTION(storage == CodecStorage::kFloat || !IsFullMatrixFactorisation(method), "storage",
                    "half storage is for pca-view and lpca codecs (fmf/dfmf factors are stored as float)");
 }
 
 nlohmann::json CompressOptions::ToJson() const {
-  return {{"method", MethodName(method)},   {"components", components},
+  nlohmann::json j = {{"method", MethodName(method)},   {"components", components},
           {"clusters", clusters},           {"target_error", target_error},
           {"retained_energy", retained_energy}, {"seed", seed},
           {"log_transform", log_transform}, {"log_epsilon", log_epsilon},
@@ -68,6 +88,18 @@ nlohmann::json CompressOptions::ToJson() const {
           {"lpca_prune", lpca.prune},       {"storage", StorageName(storage)},
           {"max_bytes", max_bytes},         {"quant_bits", tensor.quant_bits},
           {"tensor_growth", tensor.growth}};
+  if (method != CodecMethod::kNeural) return j;
+  j["log_transform"] = LogTransform();
+  j["neural_latent"] = neural.latent;
+  j["neural_hidden"] = neural.hidden;
+  j["neural_fourier"] = neural.fourier;
+  j["neural_latent_storage"] = neural.latent_storage;
+  j["neural_samples"] = neural.samples;
+  j["neural_steps"] = neural.steps;
+  j["neural_epochs"] = neural.epochs;
+  j["neural_batch"] = neural.batch;
+  j["neural_learning_rate"] = neural.learning_rate;
+  return j;
 }
 
 }  // namespace btf

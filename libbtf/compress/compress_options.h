@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -64,6 +65,22 @@ struct LpcaTensorOptions {
   void Check() const;
 };
 
+// The neural codec (neural_codec.h, neural_net.h): its shape, training set and training. The
+// provenance names are those of ToJson (neural_latent, ...), the flags --neural-latent etc.
+struct NeuralOptions {
+  int latent = 8;                   // latent values per texel (the maximum with --bytes)
+  std::vector<int> hidden{32, 32};  // decoder hidden widths
+  int fourier = 0;                  // Fourier octaves of the direction encoding (0..8); the half vector always
+  std::string latent_storage = "uint8";  // "uint8" (codes, scale and bias per latent channel) or "half"
+  // Training samples (texel, light, view), drawn per view slot in one pass (4 (7 + C) bytes each).
+  std::int64_t samples = std::int64_t(1) << 20;
+  std::int64_t steps = 0;           // > 0: training steps; 0: ceil(epochs * samples / batch)
+  double epochs = 16;
+  int batch = 4096;                 // samples per step
+  double learning_rate = 1e-2;      // decoder and latents, at step 0 (cosine decay to 5 %)
+  void Check() const;
+};
+
 struct CompressOptions {
   CodecMethod method = CodecMethod::kPcaView;
   // Components c: per view slot (pca-view) or per cluster (lpca). With an error or energy target
@@ -93,13 +110,16 @@ struct CompressOptions {
   std::optional<SceneSpec> scene;  // keep only what a scene needs (scene.h)
   LpcaOptions lpca;
   LpcaTensorOptions tensor;
+  NeuralOptions neural;
 
   // Throws btf::Error (usage) naming the first bad field.
   void Check() const;
-  // The value transform these options ask for.
-  ValueMap Transform() const { return log_transform ? ValueMap::Log(log_epsilon) : ValueMap{}; }
+  // The value transform these options ask for (neural: always the log).
+  bool LogTransform() const { return log_transform || method == CodecMethod::kNeural; }
+  ValueMap Transform() const { return LogTransform() ? ValueMap::Log(log_epsilon) : ValueMap{}; }
   // The options as stored in a codec's provenance (the scene separately): one flat object, the
-  // nested options under their historical names (lpca_memory, quant_bits, tensor_growth, ...).
+  // nested options under their historical names (lpca_memory, quant_bits, tensor_growth, ...);
+  // the neural_* keys only for the neural method.
   nlohmann::json ToJson() const;
 };
 

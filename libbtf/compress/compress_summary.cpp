@@ -15,8 +15,10 @@ nlohmann::json CompressSummary::ToJson() const {
   j["shape"] = {{"views", views}, {"lights", lights}, {"height", height}, {"width", width}, {"channels", channels}};
   j["components"] = components;
   const bool lpca_like = method == "lpca" || method == "lpca-tensor";
-  j[lpca_like ? "cluster_components" : method == "fmf" || method == "dfmf" ? "matrix_components" : "slot_components"] =
-      slot_components;
+  j[lpca_like                            ? "cluster_components"
+    : method == "fmf" || method == "dfmf" ? "matrix_components"
+    : method == "neural"                  ? "latent_components"
+                                          : "slot_components"] = slot_components;
   if (lpca_like) {
     j["clusters"] = clusters;
     j["iteration_relative_errors"] = iteration_errors;
@@ -32,6 +34,10 @@ nlohmann::json CompressSummary::ToJson() const {
                    {"quant_bits", quant_bits},
                    {"lpca_stage_relative_error", lpca_stage_error},
                    {"predicted_relative_error", predicted_error}};
+  if (method == "neural")
+    j["neural"] = {{"samples", neural_samples},       {"steps", neural_steps},
+                   {"hidden", neural_hidden},         {"decoder_parameters", neural_parameters},
+                   {"first_loss", neural_first_loss}, {"last_loss", neural_last_loss}};
   j["codec_bytes"] = codec_bytes;
   j["raw_float32_bytes"] = raw_float32_bytes;
   j["raw_half_bytes"] = raw_half_bytes;
@@ -65,6 +71,11 @@ std::string CompressSummary::Report() const {
   if (method == "lpca-tensor")
     r += fmt::format("  factor terms          {} ({}-bit codes; LPCA stage error {:.6g}, predicted {:.6g})\n", tensor_terms,
                      quant_bits, lpca_stage_error, predicted_error);
+  else if (method == "neural")
+    r += fmt::format("  latent, decoder       {} values per texel; hidden {} ({} parameters); {} samples, {} steps, "
+                     "loss {:.4g} -> {:.4g}\n",
+                     components, fmt::join(neural_hidden, ","), neural_parameters, neural_samples, neural_steps,
+                     neural_first_loss, neural_last_loss);
   else if (method == "fmf" || method == "dfmf")
     r += fmt::format("  components            {} (per matrix: {})\n", components, fmt::join(slot_components, " "));
   else

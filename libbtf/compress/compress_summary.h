@@ -36,6 +36,11 @@ struct CompressSummary {
   // predicted error of the factorised codec (transformed domain, before quantisation of weights).
   int tensor_terms = 0, quant_bits = 0;
   double lpca_stage_error = 0, predicted_error = 0;
+  // neural: training samples drawn, steps run, the first and last step's loss (mean squared error
+  // in the log domain), the decoder's hidden widths and parameter count.
+  std::int64_t neural_samples = 0, neural_steps = 0, neural_parameters = 0;
+  double neural_first_loss = 0, neural_last_loss = 0;
+  std::vector<int> neural_hidden;
   std::uint64_t codec_bytes = 0;         // Codec::StoredBytes() (float arrays at 2 bytes with half storage)
   std::uint64_t raw_float32_bytes = 0, raw_half_bytes = 0;  // of the encoded (possibly reduced) BTF
   double ratio_float32 = 0, ratio_half = 0;

@@ -29,12 +29,23 @@ double FmfBytes(const CompressOptions& o, const SlotSource& in, double c) {
   return M * c * (rows + T + 1) * 4;
 }
 
+// Latent codes (or halves) at c values per texel, their scales and biases, the decoder at float32.
+double NeuralBytes(const CompressOptions& o, const SlotSource& in, double c) {
+  const double T = double(in.height()) * in.width();
+  double params = 0, width = c + DirectionEncoding{true, o.neural.fourier}.Width();
+  for (const int h : o.neural.hidden) params += double(h) * (width + 1), width = h;
+  params += double(in.channels()) * (width + 1);
+  const double latents = o.neural.latent_storage == "half" ? 2 * T * c : T * c + 8 * c;
+  return latents + 4 * params;
+}
+
 const MethodEntry kMethods[] = {
     {CodecMethod::kPcaView, &CompressPcaView, &PcaViewBytes, true},
     {CodecMethod::kLpca, &CompressLpca, &LpcaBytes, false},
     {CodecMethod::kLpcaTensor, &CompressLpcaTensor, nullptr, false},
     {CodecMethod::kFmf, &CompressFmf, &FmfBytes, false},
     {CodecMethod::kDfmf, &CompressFmf, &FmfBytes, false},
+    {CodecMethod::kNeural, &CompressNeural, &NeuralBytes, false},
 };
 
 }  // namespace

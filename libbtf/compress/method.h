@@ -2,7 +2,7 @@
 // The compression methods' one interface (below the controller compress.cpp, above codec.h):
 // what a method gets, the table of methods, and what the methods share (error sums, the PCA
 // request of the options). Each method lives in its own file: pca_view.cpp, lpca*.cpp,
-// lpca_tensor_method.cpp, fmf_codec.cpp.
+// lpca_tensor_method.cpp, fmf_codec.cpp, neural_method.cpp.
 #include <cstdint>
 #include <string>
 
@@ -55,6 +55,7 @@ std::uint64_t CompressPcaView(const MethodContext& context, Codec& codec, Compre
 std::uint64_t CompressLpca(const MethodContext& context, Codec& codec, CompressSummary& summary);
 std::uint64_t CompressLpcaTensor(const MethodContext& context, Codec& codec, CompressSummary& summary);
 std::uint64_t CompressFmf(const MethodContext& context, Codec& codec, CompressSummary& summary);
+std::uint64_t CompressNeural(const MethodContext& context, Codec& codec, CompressSummary& summary);
 
 // The summary's error fields from error sums in the original domain (ErrorStats' definitions).
 void FillErrors(const ErrorStats& errors, CompressSummary& summary);

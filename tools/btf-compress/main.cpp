@@ -1,11 +1,12 @@
 // btf-compress: per-view PCA, local-PCA and full-matrix factorisation codecs, decoding, renderer
 // export (docs/btf-compress.md).
-//   btf-compress DATASET --method pca-view|lpca|lpca-tensor|fmf|dfmf [...] -o codec.h5
+//   btf-compress DATASET --method pca-view|lpca|lpca-tensor|fmf|dfmf|neural [...] -o codec.h5
 //   btf-compress decode CODEC -o dataset.h5
 //   btf-compress export CODEC [--format schneider|sattler] -o DIR
 #include <optional>
 
 #include "libbtf/compress/codec.h"
+#include "libbtf/compress/codec_source.h"
 #include "libbtf/compress/compress.h"
 #include "libbtf/export/sattler.h"
 #include "libbtf/export/schneider.h"
@@ -37,7 +38,8 @@ int RunCompress(const CLI::App& app, const btf::cli::CommonFlags& common, Compre
   f.options.storage = btf::ParseStorage(f.storage);
   if (!f.scene.empty()) f.options.scene = btf::SceneSpec::Load(f.scene);
   // pca-view, lpca, fmf and dfmf split their work over MPI ranks (docs/scaling.md); rank 0 alone writes.
-  if (f.options.method == btf::CodecMethod::kLpcaTensor) btf::cli::RequireSingleRank("btf-compress --method " + f.method);
+  if (f.options.method == btf::CodecMethod::kLpcaTensor || f.options.method == btf::CodecMethod::kNeural)
+    btf::cli::RequireSingleRank("btf-compress --method " + f.method);
   // Claim the output before the work: an unwritable folder fails now, not after the compression.
   std::optional<btf::AtomicOutput> target;
   if (btf::cli::PrintingRank()) {
@@ -98,7 +100,7 @@ int main(int argc, char** argv) {
   btf::CompressOptions& co = cf.options;
   app.add_option("DATASET", cf.dataset, "Input dataset (.h5, libbtf-dataset) or Bonn .btf file");
   app.add_option("--method", cf.method, "pca-view | lpca | lpca-tensor (LPCA with factorised, quantised Eigen-ABRDFs) | fmf | dfmf (Bonn "
-                 "full-matrix factorisation, per YUV channel for dfmf)");
+                 "full-matrix factorisation, per YUV channel for dfmf) | neural (per-texel latents and a decoder MLP, log domain)");
   app.add_option("--components,-c", co.components,
                  "Components per view slot (pca-view), per cluster (lpca) or of the SVD (fmf; per YUV channel for "
                  "dfmf); the maximum with --error/--energy");
@@ -112,7 +114,18 @@ int main(int argc, char** argv) {
   app.add_option("--tensor-growth", co.tensor.growth,
                  "lpca-tensor without --error/--bytes: allowed growth of the LPCA stage's squared error by dropped "
                  "factor terms");
-  app.add_option("--seed", co.seed, "Seed of k-means++ and the randomised SVD");
+  btf::NeuralOptions& no = co.neural;
+  app.add_option("--neural-latent", no.latent, "neural: latent values per texel (the maximum with --bytes)");
+  app.add_option("--neural-hidden", no.hidden, "neural: decoder hidden widths, a comma list")->delimiter(',');
+  app.add_option("--neural-fourier", no.fourier, "neural: Fourier octaves of the direction encoding (0..8)");
+  app.add_option("--neural-latent-storage", no.latent_storage,
+                 "neural: uint8 (codes with a scale and bias per latent channel) or half");
+  app.add_option("--neural-samples", no.samples, "neural: training samples drawn from the input");
+  app.add_option("--neural-steps", no.steps, "neural: training steps (0: from --neural-epochs)");
+  app.add_option("--neural-epochs", no.epochs, "neural: passes over the samples when --neural-steps is 0");
+  app.add_option("--neural-batch", no.batch, "neural: samples per training step");
+  app.add_option("--neural-lr", no.learning_rate, "neural: learning rate at step 0 (cosine decay to 5 %)");
+  app.add_option("--seed", co.seed, "Seed of k-means++, the randomised SVD and the neural codec's samples and training");
   app.add_flag("--log", co.log_transform, "Compress log(x + epsilon) (HDR data); recorded in the codec");
   app.add_option("--log-epsilon", co.log_epsilon, "Epsilon of --log, in data units");
   app.add_option("--max-iterations", co.lpca.max_iterations, "LPCA: PCA/reassignment rounds at most");
