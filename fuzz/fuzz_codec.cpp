@@ -44,7 +44,7 @@ class Bytes {
   std::size_t n_, i_ = 0;
 };
 
-std::array<std::string, 6> base_paths;
+std::array<std::string, 8> base_paths;
 
 btf::Dataset TinyDataset() {
   const btf::Sampling views("v", {btf::Vec3(0, 0, 1), btf::Vec3(0.5, 0, 0.866), btf::Vec3(0, 0.5, 0.866)});
@@ -125,7 +125,7 @@ void ReplaceAttribute(const btf::h5::File& f, const std::string& item, Bytes& b)
   const auto at = item.find('@');
   const std::string object = item.substr(0, at), name = item.substr(at + 1);
   H5Adelete_by_name(f.id(), object.c_str(), name.c_str(), H5P_DEFAULT);
-  static const char* const kStrings[] = {"pca-view", "lpca", "fmf", "dfmf", "lpca-tensor", "log", "none", "R,G,B", "", "2.0.0",
+  static const char* const kStrings[] = {"pca-view", "lpca", "fmf", "dfmf", "lpca-tensor", "neural", "uint8", "float16", "silu", "log", "none", "R,G,B", "", "2.0.0",
                                          "1.0.0", "libbtf-codec", "libbtf-dataset", "Y", "R,,B"};
   switch (b.Next() % 4) {
     case 0: return;  // deleted
@@ -175,6 +175,19 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
     t.tensor.growth = 0;  // every term: the largest factor arrays the tiny input gives
     base_paths[std::size_t(i)] = dir + (i == 4 ? "/tensor8.h5" : "/tensor16.h5");
     btf::Compress(t, *btf::MemorySource(d), &codec);
+    btf::WriteCodec(base_paths[std::size_t(i)], codec);
+  }
+  for (int i : {6, 7}) {  // neural: uint8 and half latents, a small decoder, a few steps
+    btf::CompressOptions n;
+    n.method = btf::CodecMethod::kNeural;
+    n.neural.latent = 2;
+    n.neural.hidden = {4};
+    n.neural.samples = 256;
+    n.neural.steps = 2;
+    n.neural.batch = 64;
+    n.neural.latent_storage = i == 6 ? "uint8" : "half";
+    base_paths[std::size_t(i)] = dir + (i == 6 ? "/neural8.h5" : "/neural16.h5");
+    btf::Compress(n, *btf::MemorySource(d), &codec);
     btf::WriteCodec(base_paths[std::size_t(i)], codec);
   }
   return 0;
