@@ -8,6 +8,8 @@
 #include <string>
 #include <vector>
 
+#include "libbtf/core/error.h"
+
 namespace btf::h5 {
 
 // Owns one hid_t and closes it with the matching H5xclose.
@@ -141,9 +143,12 @@ hid_t HalfType();
 // failed system calls for IoErrorSeen().
 void SilenceErrors();
 // True once an HDF5 call in this process failed because a read or write system call failed. A
-// "corrupt file" conclusion drawn after that is unreliable: the top-level handler of every tool
-// reports it as an I/O error (exit 4; tools/common/cli.cpp).
+// "corrupt file" conclusion drawn after that is unreliable (ReportedError).
 bool IoErrorSeen();
+// The error to report for `e` (the tools' top-level handler, libbtf.Error): a file read as
+// damaged (bad input) after IoErrorSeen() is a failing disk, not bad data, so it becomes an I/O
+// error (exit 4) whose message says so; any other error is returned unchanged.
+Error ReportedError(const Error& e);
 // True when HDF5's current error stack holds a failed read or write system call (an I/O
 // error, not a damaged file).
 bool LastErrorWasIo();
