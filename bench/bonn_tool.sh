@@ -1,6 +1,5 @@
 #!/bin/bash
-# Issue 15's Bonn-size targets through the tool (docs/btf-compress.md "Bonn size through the
-# tool"): writes the benchmarks' synthetic BTF (bench/synthetic_btf.h; synthetic, not a material
+# Bonn-size compression through the tool (docs/performance.md, "Compression at the Bonn size"): writes the benchmarks' synthetic BTF (bench/synthetic_btf.h; synthetic, not a material
 # model; 81 x 81 directions, 256^2 texels, RGB, 5.16 GB as float) once with bench_synthetic_input
 # (deflate 4 + shuffle, as libbtf writes datasets) and once uncompressed (btf-convert
 # --deflate-level 0), then runs btf-compress from each file under /usr/bin/time -v:

@@ -1,4 +1,4 @@
-// btf-compress benchmarks (docs/btf-compress.md "Performance"): compression time per method,
+// btf-compress benchmarks (docs/performance.md): compression time per method,
 // decode throughput, the dominant kernel's rate as a fraction of Eigen GEMM measured in the same
 // run, and ratios against straightforward implementations (full SVD per slot; plain Lloyd
 // k-means then full-SVD PCA per cluster).
@@ -273,7 +273,7 @@ void BM_PcaViewSlotKernel(benchmark::State& st) {
   omp_set_num_threads(before);
   benchmark::DoNotOptimize(err);
   const double c = 16, flops = double(L) * L * D + 4.0 * L * c * D;
-  st.SetLabel(st.range(0) == 0 ? "WidePca (fused)" : "generic Pca + decode (before issue 15)");
+  st.SetLabel(st.range(0) == 0 ? "WidePca (fused)" : "generic Pca + decode (the straightforward path)");
   st.counters["slot_s"] = secs / reps;
   st.counters["GFLOPs"] = flops * reps / secs / 1e9;
   // One thread against the 2-thread GEMM rate: x 2 gives the fraction of one core's rate.
@@ -396,7 +396,7 @@ BENCHMARK(BM_ClusterPca)
     ->MinTime(0.5)
     ->UseRealTime();
 
-// The third codec (issue 19) on the same data: lpca-tensor k = 32 at LPCA's c = 8 with its default
+// The third codec (lpca-tensor) on the same data: lpca-tensor k = 32 at LPCA's c = 8 with its default
 // rate-distortion rule and 8-bit codes, so the three codecs' ratio and error stand side by side.
 void BM_LpcaTensor(benchmark::State& st) {
   const auto& d = Data();

@@ -170,6 +170,43 @@ void FmfModel::Sample(int view, int light, std::size_t texel, float* out) const 
   for (int c = 0; c < 3; ++c) out[c] = float(rgb[c]);
 }
 
+namespace {
+
+// The factors from the sketch: per matrix m, the SVD of B^T = z[m] = X^T Q (T x r), with
+// q[m] = Q; components chosen by the options against the matrix's energy (z and q are freed).
+FmfModel FactorsFromSketch(const FmfSvdOptions& options, const SlotSource& input, Eigen::Index k,
+                           const std::vector<double>& energy, std::vector<MatrixXd>& z, std::vector<MatrixXd>& q,
+                           int* dropped) {
+  const int M = static_cast<int>(z.size());
+  FmfModel model;
+  model.decorrelated = options.decorrelate;
+  model.lights = input.lights().size();
+  model.channels = input.channels();
+  model.texels = std::size_t(input.height()) * input.width();
+  int drops = 0;
+  for (int m = 0; m < M; ++m) {
+    // B^T = V S W^T  =>  B = W S V^T, X ~ (Q W) S V^T: U = Q W, SxV = V S.
+    Eigen::BDCSVD<MatrixXd> svd(z[std::size_t(m)], Eigen::ComputeThinU | Eigen::ComputeThinV);
+    const int km = ChooseComponents(options, svd.singularValues(), int(k), energy[std::size_t(m)], &drops);
+    const MatrixXd u = q[std::size_t(m)] * svd.matrixV().leftCols(km);
+    const MatrixXd sxv = svd.matrixU().leftCols(km) * svd.singularValues().head(km).asDiagonal();
+    FmfMatrix f;
+    f.components = km;
+    for (int i = 0; i < km; ++i) f.singular_values.push_back(float(svd.singularValues()[i]));
+    f.u.resize(std::size_t(u.size()));
+    f.sxv.resize(std::size_t(sxv.size()));
+    Eigen::Map<RowF>(f.u.data(), u.rows(), km) = u.cast<float>();
+    Eigen::Map<RowF>(f.sxv.data(), sxv.rows(), km) = sxv.cast<float>();
+    model.matrices.push_back(std::move(f));
+    z[std::size_t(m)].resize(0, 0);
+    q[std::size_t(m)].resize(0, 0);
+  }
+  if (dropped) *dropped = drops;
+  return model;
+}
+
+}  // namespace
+
 FmfModel FactoriseFmf(const FmfSvdOptions& options, const SlotSource& input, const ValueMap& transform,
                       const Reporter& reporter, int* dropped, const dist::Context& ranks) {
   options.Check();
@@ -271,31 +308,7 @@ FmfModel FactoriseFmf(const FmfSvdOptions& options, const SlotSource& input, con
     range(false);
   }
   project();  // B^T = X^T Q (T x r)
-  FmfModel model;
-  model.decorrelated = options.decorrelate;
-  model.lights = input.lights().size();
-  model.channels = input.channels();
-  model.texels = std::size_t(T);
-  int drops = 0;
-  for (int m = 0; m < M; ++m) {
-    // B^T = V S W^T  =>  B = W S V^T, X ~ (Q W) S V^T: U = Q W, SxV = V S.
-    Eigen::BDCSVD<MatrixXd> svd(z[std::size_t(m)], Eigen::ComputeThinU | Eigen::ComputeThinV);
-    const int km = ChooseComponents(options, svd.singularValues(), int(k), energy[std::size_t(m)], &drops);
-    const MatrixXd u = q[std::size_t(m)] * svd.matrixV().leftCols(km);
-    const MatrixXd sxv = svd.matrixU().leftCols(km) * svd.singularValues().head(km).asDiagonal();
-    FmfMatrix f;
-    f.components = km;
-    for (int i = 0; i < km; ++i) f.singular_values.push_back(float(svd.singularValues()[i]));
-    f.u.resize(std::size_t(u.size()));
-    f.sxv.resize(std::size_t(sxv.size()));
-    Eigen::Map<RowF>(f.u.data(), u.rows(), km) = u.cast<float>();
-    Eigen::Map<RowF>(f.sxv.data(), sxv.rows(), km) = sxv.cast<float>();
-    model.matrices.push_back(std::move(f));
-    z[std::size_t(m)].resize(0, 0);
-    q[std::size_t(m)].resize(0, 0);
-  }
-  if (dropped) *dropped = drops;
-  return model;
+  return FactorsFromSketch(options, input, k, energy, z, q, dropped);
 }
 
 void WriteFmfModel(const h5::File& f, const FmfModel& model, int views, int height, int width) {

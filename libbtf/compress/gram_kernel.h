@@ -8,7 +8,7 @@
 //          g_q(i, j), where g_q(i, j) is the FMA chain over the columns k = q, q + 8, q + 16, ...
 //          in increasing k, over every tile added since Reset;
 //   basis: B(r, k) = the FMA chain over i = 0..n-1 of S(r, i) T(i, k), from 0.
-// docs/btf-compress.md, Performance, "Per-view PCA's own double kernels".
+// docs/performance.md, "Per-view PCA kernels".
 #include <cstdint>
 #include <vector>
 

@@ -22,7 +22,7 @@ constexpr Eigen::Index kBlock = 2048;  // columns/rows per double block (fits L2
 // of kRun: each column's sum is loaded once per run and the run's values added to it row by row
 // (so `sum` is the row-by-row sum in row order); the squares go to 4 x 4 double accumulators
 // (row mod 4, column mod 4), added to `total` per run. The result depends only on X. (Row by row,
-// the column sums crossed L2 once per row: docs/btf-compress.md, Performance, "the moment sums".)
+// the column sums crossed L2 once per row: bench/NOTES.md.)
 void AddMoments(const Eigen::Ref<const RowMatrixXf>& X, Eigen::VectorXd& sum, double& total) {
   constexpr Eigen::Index kRun = 8;
   const Eigen::Index d = X.cols();

@@ -29,8 +29,7 @@ struct PcaRequest {
   // Randomized path started from a previous basis: extra sketch columns instead of oversampling.
   // The start already holds about the c directions, so fewer Gaussian columns suffice: at Bonn
   // size (LPCA k = 32, c = 8) 4 instead of 10 changed the relative error by 2e-6 of itself and
-  // made the full rounds 0.8x (docs/btf-compress.md, Performance, "... the warm refits' 4 extra
-  // columns").
+  // made the full rounds 0.8x (bench/NOTES.md).
   int warm_oversampling = 4;
   std::uint64_t seed = 1;
 };

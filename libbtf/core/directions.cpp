@@ -78,6 +78,9 @@ Vec2 ConcentricDiskToSquare(const Vec2& xy) {
   return {(a + 1) / 2, (b + 1) / 2};
 }
 
+namespace {
+
+// Schneider 2004 section 6.1 "elevated" lift: equal-area disk <-> upper hemisphere (z = 1 - rho^2).
 Vec3 HemisphereFromDisk(const Vec2& xy) {
   const double rho2 = std::min(1.0, xy.squaredNorm());
   const double s = std::sqrt(2 - rho2);
@@ -93,6 +96,8 @@ Vec2 DiskFromHemisphere(const Vec3& w_in) {
   }
   return Vec2(w.x(), w.y()) / std::sqrt(1 + w.z());
 }
+
+}  // namespace
 
 Vec3 HemisphereFromSquare(const Vec2& st) { return HemisphereFromDisk(ConcentricSquareToDisk(st)); }
 Vec2 SquareFromHemisphere(const Vec3& w) { return ConcentricDiskToSquare(DiskFromHemisphere(w)); }

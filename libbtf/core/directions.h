@@ -36,10 +36,8 @@ Vec3 DifferenceVector(const Vec3& wi, const Vec3& wo);
 // Shirley-Chiu concentric map between the unit square [0,1]^2 and the unit disk (equal area).
 Vec2 ConcentricSquareToDisk(const Vec2& st);
 Vec2 ConcentricDiskToSquare(const Vec2& xy);
-// Schneider 2004 section 6.1 "elevated" lift: equal-area disk <-> upper hemisphere
-// (z = 1 - rho^2). Composed with the concentric map, each square cell covers 2*pi*ds*dt sr.
-Vec3 HemisphereFromDisk(const Vec2& xy);
-Vec2 DiskFromHemisphere(const Vec3& w);
+// The concentric map composed with Schneider 2004 section 6.1 "elevated" lift, an equal-area map
+// of the disk onto the upper hemisphere (z = 1 - rho^2): each square cell covers 2*pi*ds*dt sr.
 Vec3 HemisphereFromSquare(const Vec2& st);
 Vec2 SquareFromHemisphere(const Vec3& w);
 

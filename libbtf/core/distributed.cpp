@@ -29,14 +29,6 @@ constexpr std::size_t kMaxMessage = std::size_t(1) << 30;  // below MPI's int co
 #endif
 }  // namespace
 
-bool Built() {
-#ifdef BTF_HAVE_MPI
-  return true;
-#else
-  return false;
-#endif
-}
-
 void Init(int* argc, char*** argv) {
   if (g_started || !LaunchedAsRank()) return;
 #ifdef BTF_HAVE_MPI
@@ -143,12 +135,6 @@ void Unpacker::Take(void* dst, std::size_t n) {
 }
 
 void Unpacker::CheckSize(std::uint64_t got, std::size_t want) { BTF_CHECK(got == want); }
-
-void Barrier() {
-#ifdef BTF_HAVE_MPI
-  if (g_started) MPI_Barrier(MPI_COMM_WORLD);
-#endif
-}
 
 double AllMax(double x) {
 #ifdef BTF_HAVE_MPI

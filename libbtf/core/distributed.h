@@ -17,9 +17,6 @@
 
 namespace btf::dist {
 
-// True when libbtf was built with MPI (CMake option BTF_WITH_MPI and Open MPI found).
-bool Built();
-
 // Starts MPI when the process was launched as an MPI rank (detected by the environment the
 // launchers set: OMPI_COMM_WORLD_SIZE, PMIX_RANK, PMI_RANK); otherwise does nothing. A launched
 // process in a build without MPI throws btf::Error (usage): it would otherwise run as N
@@ -45,8 +42,6 @@ std::vector<std::uint8_t> RecvBytes(int from, int tag);
 void Broadcast(int root, void* data, std::size_t bytes);
 // Root's buffer, of any size, on every rank (collective).
 std::vector<std::uint8_t> BroadcastBytes(int root, std::vector<std::uint8_t> bytes);
-// Blocks until every rank has called it.
-void Barrier();
 // The maximum of x over all ranks, on every rank (exact).
 double AllMax(double x);
 // Every rank's bytes, on every rank (index = rank). For small per-rank results (statistics).

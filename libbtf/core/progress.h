@@ -30,10 +30,6 @@ class Reporter {
   void Warn(fmt::format_string<Args...> f, Args&&... args) const {
     if (log_) log_(LogLevel::kWarning, fmt::format(f, std::forward<Args>(args)...));
   }
-  template <typename... Args>
-  void Debug(fmt::format_string<Args...> f, Args&&... args) const {
-    if (log_) log_(LogLevel::kDebug, fmt::format(f, std::forward<Args>(args)...));
-  }
   // Reports progress; throws Cancelled if the callback asks to stop. Call from one thread only.
   void Progress(std::size_t done, std::size_t total, std::string_view stage) const {
     if (progress_ && !progress_(done, total, stage)) throw Cancelled();

@@ -216,68 +216,71 @@ std::string CompareSummary::Report() const {
   return r;
 }
 
-CompareSummary Compare(const CompareOptions& options, const SlotSource& ref, const SlotSource& test,
-                       const Reporter& reporter) {
-  options.Check();
-  CheckCompatible(ref, test);
-  CompareSummary s;
-  s.reference = ref.name();
-  s.test = test.name();
-  s.views = ref.views().size();
-  s.lights = ref.lights().size();
-  s.height = ref.height();
-  s.width = ref.width();
-  s.channels = ref.channels();
-  const int V = s.views, L = s.lights, H = s.height, W = s.width, C = s.channels;
-  const std::size_t image = ref.image_size();
-  std::vector<float> rslot(ref.slot_size()), tslot(ref.slot_size());
+namespace {
 
-  // Pass 1 (only when the peak is the reference max): the SSIM constants depend on the peak.
-  Timer timer;
+// Pass 1: the peak for PSNR and SSIM (the option, or the largest |reference value|; the SSIM
+// constants depend on it, so it comes before the other metrics).
+void FindPeak(const CompareOptions& options, const SlotSource& ref, const Reporter& reporter, float* rslot,
+              CompareSummary* s) {
   if (options.peak > 0) {
-    s.peak = options.peak;
-    s.peak_source = "option";
-  } else {
-    double mx = 0;
-    for (int v = 0; v < V; ++v) {
-      reporter.Progress(v, V, "reference peak");
-      if (!dist::Owns(v)) continue;
-      ref.ReadViewSlot(v, rslot.data());
-      CheckFiniteSlot(ref, v, rslot.data());
-      for (float x : rslot) mx = std::max(mx, std::abs(double(x)));
-    }
-    mx = dist::AllMax(mx);
-    reporter.Progress(V, V, "reference peak");
-    if (mx > 0) {
-      s.peak = mx;
-      s.peak_source = "max |reference value|";
-    } else {
-      s.peak = 1;
-      s.peak_source = "1 (reference all zero)";
-      reporter.Warn("the reference '{}' is all zero: PSNR and SSIM use peak 1", ref.name());
-    }
-    s.times.Add("peak", timer.Seconds());
+    s->peak = options.peak;
+    s->peak_source = "option";
+    return;
   }
+  Timer timer;
+  const int V = s->views;
+  double mx = 0;
+  for (int v = 0; v < V; ++v) {
+    reporter.Progress(v, V, "reference peak");
+    if (!dist::Owns(v)) continue;
+    ref.ReadViewSlot(v, rslot);
+    CheckFiniteSlot(ref, v, rslot);
+    for (std::size_t i = 0; i < ref.slot_size(); ++i) mx = std::max(mx, std::abs(double(rslot[i])));
+  }
+  mx = dist::AllMax(mx);
+  reporter.Progress(V, V, "reference peak");
+  if (mx > 0) {
+    s->peak = mx;
+    s->peak_source = "max |reference value|";
+  } else {
+    s->peak = 1;
+    s->peak_source = "1 (reference all zero)";
+    reporter.Warn("the reference '{}' is all zero: PSNR and SSIM use peak 1", ref.name());
+  }
+  s->times.Add("peak", timer.Seconds());
+}
 
-  // Pass 2: all metrics, one view slot of each input at a time.
-  timer.Restart();
+// Pass 2: every image's error sums and SSIM, one view slot of each input at a time (each rank
+// its own views, then shared so that every rank holds all of them).
+std::vector<ImageStats> MeasureImages(const CompareOptions& options, const SlotSource& ref, const SlotSource& test,
+                                      const Reporter& reporter, double peak, float* rslot, float* tslot) {
+  const int V = int(ref.views().size()), L = int(ref.lights().size());
+  const int H = ref.height(), W = ref.width(), C = ref.channels();
+  const std::size_t image = ref.image_size();
   std::vector<ImageStats> stats(std::size_t(V) * L);
   for (int v = 0; v < V; ++v) {
     reporter.Progress(v, V, "compare");
     if (!dist::Owns(v)) continue;
-    ref.ReadViewSlot(v, rslot.data());
-    test.ReadViewSlot(v, tslot.data());
-    CheckFiniteSlot(ref, v, rslot.data());
-    CheckFiniteSlot(test, v, tslot.data());
+    ref.ReadViewSlot(v, rslot);
+    test.ReadViewSlot(v, tslot);
+    CheckFiniteSlot(ref, v, rslot);
+    CheckFiniteSlot(test, v, tslot);
 #pragma omp parallel for schedule(dynamic)
     for (int l = 0; l < L; ++l)
-      stats[std::size_t(v) * L + l] = MeasureImage(rslot.data() + l * image, tslot.data() + l * image, H, W, C,
-                                                   s.peak, options.ssim, options.ssim_sigma);
+      stats[std::size_t(v) * L + l] = MeasureImage(rslot + l * image, tslot + l * image, H, W, C,
+                                                   peak, options.ssim, options.ssim_sigma);
   }
   reporter.Progress(V, V, "compare");
   if (dist::Distributed()) ShareImageStats(V, L, &stats);
+  return stats;
+}
 
-  // Merge in a fixed order (deterministic sums), the same on every rank and for any rank count.
+// The per-image statistics merged into the summary's totals, per-view and per-light RMSE and the
+// largest error, in a fixed order (deterministic sums), the same on every rank and for any rank
+// count. Returns every image's error, for the worst-image list.
+std::vector<ImageError> MergeImageStats(const CompareOptions& options, const std::vector<ImageStats>& stats,
+                                        CompareSummary* s) {
+  const int V = s->views, L = s->lights, W = s->width, C = s->channels;
   ErrorStats total;
   double ssim = 0;
   std::vector<ErrorStats> per_view(V), per_light(L);
@@ -290,60 +293,91 @@ CompareSummary Compare(const CompareOptions& options, const SlotSource& ref, con
       per_view[v].Merge(e);
       per_light[l].Merge(e);
       ssim += st.ssim;
-      if (e.max_abs_error > s.max_abs || (v == 0 && l == 0)) {
+      if (e.max_abs_error > s->max_abs || (v == 0 && l == 0)) {
         const std::size_t i = e.max_abs_index;
-        s.max_abs = e.max_abs_error;
-        s.max_view = v, s.max_light = l, s.max_channel = int(i % C), s.max_x = int((i / C) % W),
-        s.max_y = int(i / (std::size_t(C) * W));
+        s->max_abs = e.max_abs_error;
+        s->max_view = v, s->max_light = l, s->max_channel = int(i % C), s->max_x = int((i / C) % W),
+        s->max_y = int(i / (std::size_t(C) * W));
       }
       images.push_back({v, l, e.Rmse(), e.max_abs_error});
     }
-  s.values = total.count;
-  s.rmse = total.Rmse();
-  s.rel_l2 = total.RelativeL2();
-  s.psnr_db = total.PsnrDb(s.peak);
-  if (options.ssim) s.mean_ssim = ssim / (double(V) * L);
-  for (const auto& e : per_view) s.view_rmse.push_back(e.Rmse());
-  for (const auto& e : per_light) s.light_rmse.push_back(e.Rmse());
-  for (int v = 0; v < V; ++v) s.view_angles.push_back(ref.views().angles(v));
-  for (int l = 0; l < L; ++l) s.light_angles.push_back(ref.lights().angles(l));
+  s->values = total.count;
+  s->rmse = total.Rmse();
+  s->rel_l2 = total.RelativeL2();
+  s->psnr_db = total.PsnrDb(s->peak);
+  if (options.ssim) s->mean_ssim = ssim / (double(V) * L);
+  for (const auto& e : per_view) s->view_rmse.push_back(e.Rmse());
+  for (const auto& e : per_light) s->light_rmse.push_back(e.Rmse());
+  return images;
+}
+
+// Error maps of the worst images (`images` sorted worst first), on one common scale so their
+// colors compare.
+void WriteErrorMaps(const CompareOptions& options, const SlotSource& ref, const SlotSource& test,
+                    const std::vector<ImageError>& images, CompareSummary* s) {
+  Timer timer;
+  const int H = s->height, W = s->width, C = s->channels;
+  const std::size_t image = ref.image_size();
+  if (!std::filesystem::is_directory(options.error_maps_dir))
+    ThrowIo("error-map folder '{}' does not exist: create it first", options.error_maps_dir.string());
+  const int n = std::min<int>(options.error_maps, int(images.size()));
+  std::vector<std::vector<float>> refs(n, std::vector<float>(image)), tests(n, std::vector<float>(image));
+  double scale = 0;
+  for (int i = 0; i < n; ++i) {
+    ref.ReadImage(images[i].view, images[i].light, refs[i].data());
+    test.ReadImage(images[i].view, images[i].light, tests[i].data());
+    for (std::size_t t = 0; t < image / C; ++t) {
+      double e = 0;
+      for (int k = 0; k < C; ++k) {
+        const double d = double(tests[i][t * C + k]) - refs[i][t * C + k];
+        e += d * d;
+      }
+      scale = std::max(scale, std::sqrt(e / C));
+    }
+  }
+  for (int i = 0; i < n; ++i) {
+    const auto path = options.error_maps_dir / fmt::format("error_{:02d}_view{}_light{}.png", i, images[i].view,
+                                                           images[i].light);
+    ImageWriteOptions wo;
+    wo.has_format = true;
+    wo.format = PixelFormat::kUint8;
+    wo.srgb = true;
+    WriteImage(path, ErrorMapImage(refs[i].data(), tests[i].data(), H, W, C, scale), wo);
+    s->error_map_files.push_back(path.string());
+  }
+  s->times.Add("error maps", timer.Seconds());
+}
+
+}  // namespace
+
+CompareSummary Compare(const CompareOptions& options, const SlotSource& ref, const SlotSource& test,
+                       const Reporter& reporter) {
+  options.Check();
+  CheckCompatible(ref, test);
+  CompareSummary s;
+  s.reference = ref.name();
+  s.test = test.name();
+  s.views = ref.views().size();
+  s.lights = ref.lights().size();
+  s.height = ref.height();
+  s.width = ref.width();
+  s.channels = ref.channels();
+  std::vector<float> rslot(ref.slot_size()), tslot(ref.slot_size());
+
+  FindPeak(options, ref, reporter, rslot.data(), &s);
+  Timer timer;
+  const std::vector<ImageStats> stats =
+      MeasureImages(options, ref, test, reporter, s.peak, rslot.data(), tslot.data());
+  std::vector<ImageError> images = MergeImageStats(options, stats, &s);
+  for (int v = 0; v < s.views; ++v) s.view_angles.push_back(ref.views().angles(v));
+  for (int l = 0; l < s.lights; ++l) s.light_angles.push_back(ref.lights().angles(l));
   std::stable_sort(images.begin(), images.end(), [](const ImageError& a, const ImageError& b) { return a.rmse > b.rmse; });
   s.worst.assign(images.begin(), images.begin() + std::min<std::size_t>(images.size(), options.worst_images));
   s.times.Add("compare", timer.Seconds());
 
-  // Error maps of the worst images, on one common scale so their colors compare (written by
-  // rank 0 alone in a distributed run).
-  if (!options.error_maps_dir.empty() && options.error_maps > 0 && s.rmse > 0 && dist::Rank() == 0) {
-    timer.Restart();
-    if (!std::filesystem::is_directory(options.error_maps_dir))
-      ThrowIo("error-map folder '{}' does not exist: create it first", options.error_maps_dir.string());
-    const int n = std::min<int>(options.error_maps, int(images.size()));
-    std::vector<std::vector<float>> refs(n, std::vector<float>(image)), tests(n, std::vector<float>(image));
-    double scale = 0;
-    for (int i = 0; i < n; ++i) {
-      ref.ReadImage(images[i].view, images[i].light, refs[i].data());
-      test.ReadImage(images[i].view, images[i].light, tests[i].data());
-      for (std::size_t t = 0; t < image / C; ++t) {
-        double e = 0;
-        for (int k = 0; k < C; ++k) {
-          const double d = double(tests[i][t * C + k]) - refs[i][t * C + k];
-          e += d * d;
-        }
-        scale = std::max(scale, std::sqrt(e / C));
-      }
-    }
-    for (int i = 0; i < n; ++i) {
-      const auto path = options.error_maps_dir / fmt::format("error_{:02d}_view{}_light{}.png", i, images[i].view,
-                                                             images[i].light);
-      ImageWriteOptions wo;
-      wo.has_format = true;
-      wo.format = PixelFormat::kUint8;
-      wo.srgb = true;
-      WriteImage(path, ErrorMapImage(refs[i].data(), tests[i].data(), H, W, C, scale), wo);
-      s.error_map_files.push_back(path.string());
-    }
-    s.times.Add("error maps", timer.Seconds());
-  }
+  // Written by rank 0 alone in a distributed run.
+  if (!options.error_maps_dir.empty() && options.error_maps > 0 && s.rmse > 0 && dist::Rank() == 0)
+    WriteErrorMaps(options, ref, test, images, &s);
   reporter.Info("rmse {} rel {} psnr {} dB (peak {}), max abs {}", Fmt(s.rmse), s.rel_l2 ? Fmt(*s.rel_l2) : "undefined",
                 s.psnr_db ? Fmt(*s.psnr_db) : "inf", Fmt(s.peak), Fmt(s.max_abs));
   return s;

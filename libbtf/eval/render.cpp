@@ -148,6 +148,9 @@ void RenderOptions::Check() const {
   BTF_CHECK_OPTION(std::isfinite(background) && background >= 0, "background", "must be >= 0");
 }
 
+namespace {
+
+// Environment radiance (linear RGB) in world direction d (z up).
 void EnvironmentRadiance(const std::string& environment, const Vec3& d, double* rgb) {
   if (environment == "uniform") {
     rgb[0] = rgb[1] = rgb[2] = 1.0;
@@ -169,6 +172,8 @@ void EnvironmentRadiance(const std::string& environment, const Vec3& d, double* 
   const double sun = 8.0 * Lobe(d, 50, -110, 16);
   for (int k = 0; k < 3; ++k) rgb[k] = horizon[k] + (zenith[k] - horizon[k]) * t + sun;
 }
+
+}  // namespace
 
 std::vector<EnvironmentSample> EnvironmentSamples(const RenderOptions& o) {
   // Fibonacci sphere, equal solid angle each.

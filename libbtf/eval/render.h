@@ -77,9 +77,6 @@ SurfacePoint TracePixel(const RenderOptions& options, int px, int py);
 // Linear radiance image (3 channels; BTFs with 1 channel are shown gray, extra channels dropped).
 Image Render(const BtfEvaluator& btf, const RenderOptions& options);
 
-// Environment radiance (linear RGB) in world direction d (z up); exposed for tests and docs.
-void EnvironmentRadiance(const std::string& environment, const Vec3& d, double* rgb);
-
 // Side-by-side panel: ground truth | test | difference, tone-mapped with one exposure (ground
 // truth's 99th-percentile luminance -> 0.8) and labelled above each image (DrawText; without a
 // font, see LabelFont, the panel has no text and `stats->labelled` is false). The difference is

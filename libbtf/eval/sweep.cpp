@@ -42,6 +42,9 @@ void SweepOptions::Check() const {
                    "viewer_dir", "must be the viewer folder with node_modules/three (run 'npm ci' in it; ./run does)");
 }
 
+namespace {
+
+// Median of a non-empty list (mean of the middle two for even sizes).
 double Median(std::vector<double> v) {
   if (v.empty()) ThrowUsage("median of an empty list");
   std::sort(v.begin(), v.end());
@@ -49,6 +52,7 @@ double Median(std::vector<double> v) {
   return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
 
+// Base64 (RFC 4648, with padding), for data URIs.
 std::string Base64(const std::string& bytes) {
   static constexpr char kAlphabet[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
   std::string out;
@@ -65,8 +69,6 @@ std::string Base64(const std::string& bytes) {
   }
   return out;
 }
-
-namespace {
 
 // The sweep's folder: files are written under the temporary folder (AtomicDirectory) and
 // recorded by their final names.

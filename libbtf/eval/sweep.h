@@ -105,10 +105,4 @@ struct SweepSummary {
 SweepSummary RunSweep(const SweepOptions& options, const std::filesystem::path& dataset,
                       const std::filesystem::path& output_dir, const Reporter& reporter = {});
 
-// Median of a non-empty list (mean of the middle two for even sizes).
-double Median(std::vector<double> values);
-
-// Base64 (RFC 4648, with padding), for data URIs.
-std::string Base64(const std::string& bytes);
-
 }  // namespace btf

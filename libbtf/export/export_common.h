@@ -11,7 +11,7 @@
 
 #include "libbtf/compress/codec.h"
 #include "libbtf/core/atomic_file.h"
-#include "libbtf/export/half.h"
+#include "libbtf/io/half.h"
 
 namespace btf::export_detail {
 

@@ -10,7 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "libbtf/core/error.h"
-#include "libbtf/export/half.h"
+#include "libbtf/io/half.h"
 
 namespace btf::export_detail {
 

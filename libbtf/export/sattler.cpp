@@ -42,9 +42,18 @@ std::string SattlerExportSummary::Report() const {
                      FormatBytes(texture_bytes), FormatBytes(weight_bytes), times.Report());
 }
 
-SattlerExportSummary ExportSattler(const SattlerExportOptions& o, const Codec& codec, const std::filesystem::path& out_dir,
-                                   const Reporter& rep) {
-  o.Check();
+namespace {
+
+// The texture array: image g = v * F + f is tile (g % tiles_x, (g / tiles_x) % tiles_y) of layer
+// g / per_layer; a tile is one W x H image.
+struct SattlerAtlas {
+  int tiles_x = 0, tiles_y = 0, per_layer = 0, layers = 0;
+  int width = 0, height = 0;
+};
+
+// The codec's fitness for this export (pca-view, no value transform, >= 3 views and lights, an
+// image that fits a tile).
+void CheckSattlerCodec(const SattlerExportOptions& o, const Codec& codec) {
   if (codec.method() != CodecMethod::kPcaView)
     ThrowUsage("the sattler export needs a pca-view codec; this one is '{}' (compress with --method pca-view, or "
                "export an lpca codec with --format schneider)",
@@ -52,88 +61,87 @@ SattlerExportSummary ExportSattler(const SattlerExportOptions& o, const Codec& c
   if (codec.transform() != ValueTransform::kNone)
     ThrowUsage("the sattler export needs a codec without value transform (the renderer sums weighted images "
                "linearly); compress without --log");
-  const int V = codec.num_views(), L = codec.num_lights(), W = codec.width(), H = codec.height(), C = codec.channels();
+  const int V = codec.num_views(), L = codec.num_lights(), W = codec.width(), H = codec.height();
   if (V < 3 || L < 3)
     ThrowUsage("the sattler export blends the three nearest sampled directions; this codec has {} view(s) and {} "
                "light(s) (need >= 3 each)", V, L);
   if (W > o.atlas_side || H > o.atlas_side)
     ThrowUsage("invalid option 'atlas_side': {} is smaller than the {} x {} texture (one image per tile; WebGL2 "
                "allows up to 2048)", o.atlas_side, W, H);
-  int cmax = 0;
-  for (const PcaViewSlot& s : codec.pca_view()) cmax = std::max(cmax, s.components);
-  const int c = o.components < 0 ? cmax : std::min(o.components, cmax), F = 1 + c, NT = 1 + F, NT4 = (NT + 3) / 4;
-  if (L * NT4 > 2048 || V > 2048)
-    ThrowUsage("the terms texture ({} x {} texels) exceeds WebGL2's guaranteed 2048; export fewer components "
-               "(--components)", L * NT4, V);
-  const int G = V * F, tiles_x = std::min(G, o.atlas_side / W);
-  const int tiles_y = std::min((G + tiles_x - 1) / tiles_x, o.atlas_side / H);
-  const int per_layer = tiles_x * tiles_y, layers = (G + per_layer - 1) / per_layer;
-  if (layers > 256)
-    ThrowUsage("the export needs {} texture-array layers (WebGL2 guarantees 256); raise --atlas-side (now {}, up to "
-               "2048) or export fewer components (--components)", layers, o.atlas_side);
-  const int AW = tiles_x * W, AH = tiles_y * H;
-  Timer timer;
-  AtomicDirectory output(out_dir, "manifest.json");
-  const std::filesystem::path& dir = output.temp_path();
-  const bool half = o.storage == "f16";
-  const std::size_t D = codec.image_size();
-  NormalisedStore store(half, std::size_t(layers) * AH * AW * C);
-  std::vector<float> scale_bias(std::size_t(G) * 2, 0.0f), terms(std::size_t(V) * L * NT, 0.0f);
-  double max_q = 0;
-  for (int v = 0; v < V; ++v) {
-    rep.Progress(std::size_t(v), std::size_t(V), "quantise");
-    const PcaViewSlot& s = codec.pca_view()[static_cast<std::size_t>(v)];
-    for (int f = 0; f < F; ++f) {
-      const int g = v * F + f;
-      const bool present = f == 0 || f - 1 < s.components;  // absent components stay t = 0, scale 0
-      const float* img = !present ? nullptr : f == 0 ? s.mean.data() : &s.basis[std::size_t(f - 1) * D];
-      double lo = 0, hi = 0;
-      if (img) {
-        lo = hi = img[0];
-        for (std::size_t i = 0; i < D; ++i) lo = std::min(lo, double(img[i])), hi = std::max(hi, double(img[i]));
-      }
-      // Scale and bias: t = (value - bias) / scale spans [0, 1] exactly (all 256 codes in use).
-      const float bias = static_cast<float>(lo), scale = static_cast<float>(hi - lo);
-      scale_bias[std::size_t(g) * 2] = scale;
-      scale_bias[std::size_t(g) * 2 + 1] = bias;
-      const int layer = g / per_layer, tx = g % tiles_x, ty = (g / tiles_x) % tiles_y;
-      for (int y = 0; y < H; ++y)
-        for (int x = 0; x < W; ++x)
-          for (int ch = 0; ch < C; ++ch) {
-            const double val = img ? img[(std::size_t(y) * W + x) * C + ch] : 0.0;
-            const double t = scale > 0 ? std::clamp((val - bias) / double(scale), 0.0, 1.0) : 0.0;
-            const std::size_t at =
-                ((std::size_t(layer) * AH + std::size_t(ty) * H + y) * AW + std::size_t(tx) * W + x) * C + ch;
-            max_q = std::max(max_q, std::abs(store.Put(at, t) - t));
-          }
-    }
-    // Terms of (v, l): offset = bias_0 + sum_k w_k bias_(1+k); weight 0 = scale_0, 1 + k: w_k scale_(1+k).
-    for (int l = 0; l < L; ++l) {
-      float* tm = &terms[(std::size_t(v) * L + l) * NT];
-      double offset = scale_bias[std::size_t(v) * F * 2 + 1];
-      tm[1] = scale_bias[std::size_t(v) * F * 2];
-      for (int k = 0; k < std::min(c, s.components); ++k) {
-        const double w = s.weights[std::size_t(l) * s.components + k];
-        const std::size_t g = std::size_t(v) * F + 1 + k;
-        offset += w * scale_bias[g * 2 + 1];
-        tm[2 + k] = static_cast<float>(w * scale_bias[g * 2]);
-      }
-      tm[0] = static_cast<float>(offset);
-    }
-  }
-  SattlerExportSummary s;
-  s.times.Add("quantise", timer.Seconds());
-  timer.Restart();
-  const std::string images_file = half ? "images.f16" : "images.u8";
-  s.texture_bytes = store.Write(dir / images_file);
-  s.weight_bytes = WriteBinary(dir / "terms.f32", terms);
-  WriteBinary(dir / "scale_bias.f32", scale_bias);
+}
 
-  auto directions = [](const Sampling& sm) {
-    nlohmann::json a = nlohmann::json::array();
-    for (const Vec3& d : sm.directions()) a.push_back({d.x(), d.y(), d.z()});
-    return a;
-  };
+SattlerAtlas PlanAtlas(const SattlerExportOptions& o, int images, int W, int H) {
+  SattlerAtlas a;
+  a.tiles_x = std::min(images, o.atlas_side / W);
+  a.tiles_y = std::min((images + a.tiles_x - 1) / a.tiles_x, o.atlas_side / H);
+  a.per_layer = a.tiles_x * a.tiles_y;
+  a.layers = (images + a.per_layer - 1) / a.per_layer;
+  if (a.layers > 256)
+    ThrowUsage("the export needs {} texture-array layers (WebGL2 guarantees 256); raise --atlas-side (now {}, up to "
+               "2048) or export fewer components (--components)", a.layers, o.atlas_side);
+  a.width = a.tiles_x * W, a.height = a.tiles_y * H;
+  return a;
+}
+
+// Quantises image g (H x W x C values, or all zero when img is null) into its tile, with the
+// scale and bias that make t = (value - bias) / scale span [0, 1] exactly (all 256 codes in use),
+// stored in scale_bias. Returns the largest quantisation error of t.
+double StoreImage(const float* img, int g, const SattlerAtlas& atlas, int H, int W, int C, NormalisedStore* store,
+                  std::vector<float>* scale_bias) {
+  const std::size_t D = std::size_t(H) * W * C;
+  double lo = 0, hi = 0;
+  if (img) {
+    lo = hi = img[0];
+    for (std::size_t i = 0; i < D; ++i) lo = std::min(lo, double(img[i])), hi = std::max(hi, double(img[i]));
+  }
+  const float bias = static_cast<float>(lo), scale = static_cast<float>(hi - lo);
+  (*scale_bias)[std::size_t(g) * 2] = scale;
+  (*scale_bias)[std::size_t(g) * 2 + 1] = bias;
+  const int layer = g / atlas.per_layer, tx = g % atlas.tiles_x, ty = (g / atlas.tiles_x) % atlas.tiles_y;
+  const int AH = atlas.height, AW = atlas.width;
+  double max_q = 0;
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x)
+      for (int ch = 0; ch < C; ++ch) {
+        const double val = img ? img[(std::size_t(y) * W + x) * C + ch] : 0.0;
+        const double t = scale > 0 ? std::clamp((val - bias) / double(scale), 0.0, 1.0) : 0.0;
+        const std::size_t at =
+            ((std::size_t(layer) * AH + std::size_t(ty) * H + y) * AW + std::size_t(tx) * W + x) * C + ch;
+        max_q = std::max(max_q, std::abs(store->Put(at, t) - t));
+      }
+  return max_q;
+}
+
+// Terms of (v, l) for every light l of view slot s (c components exported, F = 1 + c images per
+// view): offset = bias_0 + sum_k w_k bias_(1+k); weight 0 = scale_0, 1 + k: w_k scale_(1+k).
+void FoldViewTerms(const PcaViewSlot& s, int v, int L, int c, const std::vector<float>& scale_bias,
+                   std::vector<float>* terms) {
+  const int F = 1 + c, NT = 1 + F;
+  for (int l = 0; l < L; ++l) {
+    float* tm = &(*terms)[(std::size_t(v) * L + l) * NT];
+    double offset = scale_bias[std::size_t(v) * F * 2 + 1];
+    tm[1] = scale_bias[std::size_t(v) * F * 2];
+    for (int k = 0; k < std::min(c, s.components); ++k) {
+      const double w = s.weights[std::size_t(l) * s.components + k];
+      const std::size_t g = std::size_t(v) * F + 1 + k;
+      offset += w * scale_bias[g * 2 + 1];
+      tm[2 + k] = static_cast<float>(w * scale_bias[g * 2]);
+    }
+    tm[0] = static_cast<float>(offset);
+  }
+}
+
+nlohmann::json DirectionsJson(const Sampling& sm) {
+  nlohmann::json a = nlohmann::json::array();
+  for (const Vec3& d : sm.directions()) a.push_back({d.x(), d.y(), d.z()});
+  return a;
+}
+
+nlohmann::json SattlerManifest(const SattlerExportOptions& o, const Codec& codec, const SattlerAtlas& atlas, int F,
+                               const std::string& images_file) {
+  const bool half = o.storage == "f16";
+  const int V = codec.num_views(), L = codec.num_lights(), W = codec.width(), H = codec.height(), C = codec.channels();
+  const int NT = 1 + F, AW = atlas.width, AH = atlas.height, layers = atlas.layers;
   nlohmann::json j;
   j["format"] = kSchneiderExportFormat;
   j["format_version"] = kSchneiderExportVersion;
@@ -143,8 +151,8 @@ SattlerExportSummary ExportSattler(const SattlerExportOptions& o, const Codec& c
   j["texture"] = export_detail::TextureJson(codec);
   j["values"] = export_detail::ValuesJson(codec);
   j["frame"] = "z = surface normal, x = weft (texture u), y = warp (texture v)";
-  j["views"] = {{"count", V}, {"directions", directions(codec.views())}};
-  j["lights"] = {{"count", L}, {"directions", directions(codec.lights())}};
+  j["views"] = {{"count", V}, {"directions", DirectionsJson(codec.views())}};
+  j["lights"] = {{"count", L}, {"directions", DirectionsJson(codec.lights())}};
   j["interpolation"] =
       "for wo among the view directions and for wi among the light directions: the three with the largest dot "
       "product (ties keep the lower index first), barycentric weights a solving [d0 d1 d2] a = w (a = (1, 0, 0) if "
@@ -159,7 +167,7 @@ SattlerExportSummary ExportSattler(const SattlerExportOptions& o, const Codec& c
       {"shape", {layers, AH, AW, C}},
       {"dimension_names", {"layer", "y", "x", "channel"}},
       {"width", AW}, {"height", AH}, {"layers", layers},
-      {"tiles_x", tiles_x}, {"tiles_y", tiles_y}, {"tile_width", W}, {"tile_height", H},
+      {"tiles_x", atlas.tiles_x}, {"tiles_y", atlas.tiles_y}, {"tile_width", W}, {"tile_height", H},
       {"max_side", o.atlas_side},
       {"tile_of_image",
        "g = view * F + f; layer = g / (tiles_x * tiles_y), tile column = g % tiles_x, tile row = (g / tiles_x) % tiles_y"},
@@ -179,6 +187,51 @@ SattlerExportSummary ExportSattler(const SattlerExportOptions& o, const Codec& c
                                 StorageQuantizationBound(o.storage))}};
   j["glsl"] = {{"file", "btf_sattler.glsl"}, {"function", "vec3 btf_eval(vec2 uv, vec3 wi, vec3 wo)"}};
   j["byte_order"] = "little-endian";
+  return j;
+}
+
+}  // namespace
+
+SattlerExportSummary ExportSattler(const SattlerExportOptions& o, const Codec& codec, const std::filesystem::path& out_dir,
+                                   const Reporter& rep) {
+  o.Check();
+  CheckSattlerCodec(o, codec);
+  const int V = codec.num_views(), L = codec.num_lights(), W = codec.width(), H = codec.height(), C = codec.channels();
+  int cmax = 0;
+  for (const PcaViewSlot& s : codec.pca_view()) cmax = std::max(cmax, s.components);
+  const int c = o.components < 0 ? cmax : std::min(o.components, cmax), F = 1 + c, NT = 1 + F, NT4 = (NT + 3) / 4;
+  if (L * NT4 > 2048 || V > 2048)
+    ThrowUsage("the terms texture ({} x {} texels) exceeds WebGL2's guaranteed 2048; export fewer components "
+               "(--components)", L * NT4, V);
+  const int G = V * F;
+  const SattlerAtlas atlas = PlanAtlas(o, G, W, H);
+  Timer timer;
+  AtomicDirectory output(out_dir, "manifest.json");
+  const std::filesystem::path& dir = output.temp_path();
+  const bool half = o.storage == "f16";
+  const std::size_t D = codec.image_size();
+  NormalisedStore store(half, std::size_t(atlas.layers) * atlas.height * atlas.width * C);
+  std::vector<float> scale_bias(std::size_t(G) * 2, 0.0f), terms(std::size_t(V) * L * NT, 0.0f);
+  double max_q = 0;
+  for (int v = 0; v < V; ++v) {
+    rep.Progress(std::size_t(v), std::size_t(V), "quantise");
+    const PcaViewSlot& s = codec.pca_view()[static_cast<std::size_t>(v)];
+    for (int f = 0; f < F; ++f) {
+      const bool present = f == 0 || f - 1 < s.components;  // absent components stay t = 0, scale 0
+      const float* img = !present ? nullptr : f == 0 ? s.mean.data() : &s.basis[std::size_t(f - 1) * D];
+      max_q = std::max(max_q, StoreImage(img, v * F + f, atlas, H, W, C, &store, &scale_bias));
+    }
+    FoldViewTerms(s, v, L, c, scale_bias, &terms);
+  }
+  SattlerExportSummary s;
+  s.times.Add("quantise", timer.Seconds());
+  timer.Restart();
+  const std::string images_file = half ? "images.f16" : "images.u8";
+  s.texture_bytes = store.Write(dir / images_file);
+  s.weight_bytes = WriteBinary(dir / "terms.f32", terms);
+  WriteBinary(dir / "scale_bias.f32", scale_bias);
+
+  const nlohmann::json j = SattlerManifest(o, codec, atlas, F, images_file);
   WriteTextFileAtomic(dir / "btf_sattler.glsl", SattlerGlsl(j));
   WriteTextFileAtomic(dir / "manifest.json", j.dump(2) + "\n");
   output.Commit();
@@ -186,7 +239,8 @@ SattlerExportSummary ExportSattler(const SattlerExportOptions& o, const Codec& c
   s.directory = out_dir.string();
   s.views = V, s.lights = L, s.functions = F, s.height = H, s.width = W, s.channels = C;
   s.storage = o.storage;
-  s.layer_width = AW, s.layer_height = AH, s.layers = layers, s.tiles_x = tiles_x, s.tiles_y = tiles_y;
+  s.layer_width = atlas.width, s.layer_height = atlas.height, s.layers = atlas.layers;
+  s.tiles_x = atlas.tiles_x, s.tiles_y = atlas.tiles_y;
   s.max_quantization_error = max_q;
   rep.Progress(std::size_t(V), std::size_t(V), "quantise");
   return s;

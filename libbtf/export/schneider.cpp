@@ -48,115 +48,112 @@ std::string SchneiderExportSummary::Report() const {
                      FormatBytes(weight_bytes), FormatBytes(index_bytes), times.Report());
 }
 
-SchneiderExportSummary ExportSchneider(const SchneiderExportOptions& o, const Codec& codec,
-                                       const std::filesystem::path& out_dir, const Reporter& rep) {
-  o.Check();
-  if (codec.method() != CodecMethod::kLpca)
-    ThrowUsage("the schneider export needs an LPCA codec; this one is '{}' (compress with --method lpca; a pca-view "
-               "codec exports with --format sattler)",
-               MethodName(codec.method()));
-  if (codec.transform() != ValueTransform::kNone)
-    ThrowUsage("the schneider export needs a codec without value transform (the renderer sums weighted "
-               "functions linearly); compress without --log");
-  if (codec.lpca().clusters > 65535) ThrowUsage("the schneider export stores cluster indices in 16 bits (<= 65535 clusters)");
-  Timer timer;
-  SchneiderExportSummary s;
-  const LpcaModel& m = codec.lpca();
-  const int K = m.clusters, c = o.components < 0 ? m.components : std::min(o.components, m.components);
-  const int F = 1 + c, nv = o.view_grid, nl = o.light_grid, C = codec.channels(), L = codec.num_lights();
-  const std::size_t d = codec.abrdf_size(), T = std::size_t(codec.height()) * codec.width();
-  const std::size_t grid = std::size_t(nv) * nv * nl * nl;  // per function, per channel
-  AtomicDirectory output(out_dir, "manifest.json");
-  const std::filesystem::path& dir = output.temp_path();
+namespace {
 
-  // Interpolants of every grid direction over the codec's samplings.
-  std::vector<Interpolant> view_ip(std::size_t(nv) * nv), light_ip(std::size_t(nl) * nl);
-  for (int t = 0; t < nv; ++t)
-    for (int sv = 0; sv < nv; ++sv)
-      view_ip[std::size_t(t) * nv + sv] =
-          codec.views().Barycentric(HemisphereFromSquare(Vec2(GridCoordinate(sv, nv), GridCoordinate(t, nv))));
-  for (int t = 0; t < nl; ++t)
-    for (int sl = 0; sl < nl; ++sl)
-      light_ip[std::size_t(t) * nl + sl] =
-          codec.lights().Barycentric(HemisphereFromSquare(Vec2(GridCoordinate(sl, nl), GridCoordinate(t, nl))));
+// Atlas of the resampled functions: function g = k * F + f is tile (g % tiles_x, (g / tiles_x) %
+// tiles_y) of page g / per_page; a tile is nv x nv texels, the page depth nl * nl.
+struct SchneiderAtlas {
+  int tiles_x = 0, tiles_y = 0, per_page = 0, pages = 0;
+  int width = 0, height = 0, depth = 0;
+};
 
-  // Atlas: function g = k * F + f is tile (g % tiles_x, (g / tiles_x) % tiles_y) of page g / per_page.
-  const int G = K * F;
-  const int tiles_x = std::min(G, o.atlas_side / nv);
-  const int tiles_y = std::min((G + tiles_x - 1) / tiles_x, o.atlas_side / nv);
-  const int per_page = tiles_x * tiles_y, pages = (G + per_page - 1) / per_page;
-  const int AW = tiles_x * nv, AH = tiles_y * nv, AD = nl * nl;
-  const std::size_t atlas_values = std::size_t(pages) * AD * AH * AW * C;
-  const bool half = o.storage == "f16";
-  NormalisedStore store(half, atlas_values);
-  std::vector<float> scale_bias(std::size_t(G) * 2, 0.0f);
-  double max_q = 0;
-  for (int k = 0; k < K; ++k) {
-    rep.Progress(std::size_t(k), std::size_t(K), "resample");
-    for (int f = 0; f < F; ++f) {
-      const float* fn = f == 0 ? &m.means[std::size_t(k) * d] : &m.basis[(std::size_t(k) * m.components + f - 1) * d];
-      // Resample: value[z = tl * nl + sl][tv][sv][ch], z = slab index * nl + s_l index.
-      std::vector<double> vals(grid * C);
+SchneiderAtlas PlanAtlas(int functions, int nv, int nl, int atlas_side) {
+  SchneiderAtlas a;
+  a.tiles_x = std::min(functions, atlas_side / nv);
+  a.tiles_y = std::min((functions + a.tiles_x - 1) / a.tiles_x, atlas_side / nv);
+  a.per_page = a.tiles_x * a.tiles_y;
+  a.pages = (functions + a.per_page - 1) / a.per_page;
+  a.width = a.tiles_x * nv, a.height = a.tiles_y * nv, a.depth = nl * nl;
+  return a;
+}
+
+// Interpolants over `sampling` of every direction of an n x n grid on the square, row t, column s
+// at [t * n + s].
+std::vector<Interpolant> GridInterpolants(const Sampling& sampling, int n) {
+  std::vector<Interpolant> ip(std::size_t(n) * n);
+  for (int t = 0; t < n; ++t)
+    for (int s = 0; s < n; ++s)
+      ip[std::size_t(t) * n + s] =
+          sampling.Barycentric(HemisphereFromSquare(Vec2(GridCoordinate(s, n), GridCoordinate(t, n))));
+  return ip;
+}
+
+// One function (an ABRDF of the codec's views x lights x channels) resampled on the grid:
+// value[z = tl * nl + sl][tv][sv][ch], z = slab index * nl + s_l index.
+std::vector<double> ResampleFunction(const float* fn, const std::vector<Interpolant>& view_ip,
+                                     const std::vector<Interpolant>& light_ip, int nv, int nl, int C, int L) {
+  std::vector<double> vals(std::size_t(nv) * nv * nl * nl * C);
 #pragma omp parallel for schedule(static)
-      for (std::ptrdiff_t z = 0; z < std::ptrdiff_t(nl) * nl; ++z) {
-        const Interpolant& il = light_ip[static_cast<std::size_t>(z)];  // z = tl * nl + sl: same order
-        for (int tv = 0; tv < nv; ++tv)
-          for (int sv = 0; sv < nv; ++sv) {
-            const Interpolant& iv = view_ip[std::size_t(tv) * nv + sv];
-            for (int ch = 0; ch < C; ++ch) {
-              double acc = 0;
-              for (int a = 0; a < iv.count; ++a)
-                for (int b = 0; b < il.count; ++b)
-                  acc += iv.weight[a] * il.weight[b] * fn[(std::size_t(iv.index[a]) * L + il.index[b]) * C + ch];
-              vals[((std::size_t(z) * nv + tv) * nv + sv) * C + ch] = acc;
-            }
-          }
+  for (std::ptrdiff_t z = 0; z < std::ptrdiff_t(nl) * nl; ++z) {
+    const Interpolant& il = light_ip[static_cast<std::size_t>(z)];  // z = tl * nl + sl: same order
+    for (int tv = 0; tv < nv; ++tv)
+      for (int sv = 0; sv < nv; ++sv) {
+        const Interpolant& iv = view_ip[std::size_t(tv) * nv + sv];
+        for (int ch = 0; ch < C; ++ch) {
+          double acc = 0;
+          for (int a = 0; a < iv.count; ++a)
+            for (int b = 0; b < il.count; ++b)
+              acc += iv.weight[a] * il.weight[b] * fn[(std::size_t(iv.index[a]) * L + il.index[b]) * C + ch];
+          vals[((std::size_t(z) * nv + tv) * nv + sv) * C + ch] = acc;
+        }
       }
-      // Scale and bias: t = (value - bias) / scale spans [0, 1] exactly (all 256 codes in use).
-      double lo = vals.empty() ? 0 : vals[0], hi = lo;
-      for (double v : vals) lo = std::min(lo, v), hi = std::max(hi, v);
-      const int g = k * F + f;
-      const float bias = static_cast<float>(lo), scale = static_cast<float>(hi - lo);
-      scale_bias[std::size_t(g) * 2] = scale;
-      scale_bias[std::size_t(g) * 2 + 1] = bias;
-      const int page = g / per_page, tx = g % tiles_x, ty = (g / tiles_x) % tiles_y;
-      for (int z = 0; z < AD; ++z)
-        for (int tv = 0; tv < nv; ++tv)
-          for (int sv = 0; sv < nv; ++sv)
-            for (int ch = 0; ch < C; ++ch) {
-              const double v = vals[((std::size_t(z) * nv + tv) * nv + sv) * C + ch];
-              const double t = scale > 0 ? std::clamp((v - bias) / double(scale), 0.0, 1.0) : 0.0;
-              const std::size_t at =
-                  (((std::size_t(page) * AD + z) * AH + std::size_t(ty) * nv + tv) * AW + std::size_t(tx) * nv + sv) * C + ch;
-              max_q = std::max(max_q, std::abs(store.Put(at, t) - t));
-            }
-    }
   }
-  s.times.Add("resample", timer.Seconds());
-  timer.Restart();
-  // Terms per texel: offset = sum_f w_f bias_f, then w_f scale_f (w_0 = 1 for the mean).
+  return vals;
+}
+
+// Quantises resampled function g into its atlas tile, with the scale and bias that make
+// t = (value - bias) / scale span [0, 1] exactly (all 256 codes in use), stored in scale_bias.
+// Returns the largest quantisation error of t.
+double StoreFunction(const std::vector<double>& vals, int g, const SchneiderAtlas& atlas, int nv, int C,
+                     NormalisedStore* store, std::vector<float>* scale_bias) {
+  double lo = vals.empty() ? 0 : vals[0], hi = lo;
+  for (double v : vals) lo = std::min(lo, v), hi = std::max(hi, v);
+  const float bias = static_cast<float>(lo), scale = static_cast<float>(hi - lo);
+  (*scale_bias)[std::size_t(g) * 2] = scale;
+  (*scale_bias)[std::size_t(g) * 2 + 1] = bias;
+  const int page = g / atlas.per_page, tx = g % atlas.tiles_x, ty = (g / atlas.tiles_x) % atlas.tiles_y;
+  const int AD = atlas.depth, AH = atlas.height, AW = atlas.width;
+  double max_q = 0;
+  for (int z = 0; z < AD; ++z)
+    for (int tv = 0; tv < nv; ++tv)
+      for (int sv = 0; sv < nv; ++sv)
+        for (int ch = 0; ch < C; ++ch) {
+          const double v = vals[((std::size_t(z) * nv + tv) * nv + sv) * C + ch];
+          const double t = scale > 0 ? std::clamp((v - bias) / double(scale), 0.0, 1.0) : 0.0;
+          const std::size_t at =
+              (((std::size_t(page) * AD + z) * AH + std::size_t(ty) * nv + tv) * AW + std::size_t(tx) * nv + sv) * C + ch;
+          max_q = std::max(max_q, std::abs(store->Put(at, t) - t));
+        }
+  return max_q;
+}
+
+// Terms per texel (1 + F each): offset = sum_f w_f bias_f, then w_f scale_f (w_0 = 1 for the
+// mean); and each texel's cluster index.
+void FoldTerms(const LpcaModel& m, int F, std::size_t T, const std::vector<float>& scale_bias,
+               std::vector<float>* terms, std::vector<std::uint16_t>* index) {
   const int NT = 1 + F;
-  std::vector<float> terms(T * NT);
-  std::vector<std::uint16_t> index(T);
+  terms->assign(T * NT, 0.0f);
+  index->assign(T, 0);
   for (std::size_t t = 0; t < T; ++t) {
     const int k = m.cluster_of[t];
-    index[t] = static_cast<std::uint16_t>(k);
+    (*index)[t] = static_cast<std::uint16_t>(k);
     double offset = 0;
     for (int f = 0; f < F; ++f) {
       const double w = f == 0 ? 1.0
                               : (f - 1 < m.cluster_components[static_cast<std::size_t>(k)] ? m.weights[t * m.components + f - 1] : 0.0f);
       const std::size_t g = std::size_t(k) * F + f;
       offset += w * scale_bias[g * 2 + 1];
-      terms[t * NT + 1 + f] = static_cast<float>(w * scale_bias[g * 2]);
+      (*terms)[t * NT + 1 + f] = static_cast<float>(w * scale_bias[g * 2]);
     }
-    terms[t * NT] = static_cast<float>(offset);
+    (*terms)[t * NT] = static_cast<float>(offset);
   }
-  const std::string atlas_file = half ? "atlas.f16" : "atlas.u8";
-  s.texture_bytes = store.Write(dir / atlas_file);
-  s.weight_bytes = WriteBinary(dir / "terms.f32", terms);
-  s.index_bytes = WriteBinary(dir / "cluster_index.u16", index);
-  WriteBinary(dir / "scale_bias.f32", scale_bias);
+}
 
+nlohmann::json SchneiderManifest(const SchneiderExportOptions& o, const Codec& codec, const SchneiderAtlas& atlas,
+                                 int K, int F, const std::string& atlas_file) {
+  const bool half = o.storage == "f16";
+  const int nv = o.view_grid, nl = o.light_grid, C = codec.channels(), NT = 1 + F;
+  const int AW = atlas.width, AH = atlas.height, AD = atlas.depth, pages = atlas.pages;
   nlohmann::json j;
   j["format"] = kSchneiderExportFormat;
   j["format_version"] = kSchneiderExportVersion;
@@ -183,7 +180,7 @@ SchneiderExportSummary ExportSchneider(const SchneiderExportOptions& o, const Co
       {"shape", {pages, AD, AH, AW, C}},
       {"dimension_names", {"page", "z", "y", "x", "channel"}},
       {"width", AW}, {"height", AH}, {"depth", AD}, {"pages", pages},
-      {"tiles_x", tiles_x}, {"tiles_y", tiles_y}, {"tile_width", nv}, {"tile_height", nv},
+      {"tiles_x", atlas.tiles_x}, {"tiles_y", atlas.tiles_y}, {"tile_width", nv}, {"tile_height", nv},
       {"max_side", o.atlas_side},
       {"tile_of_function",
        "g = cluster * F + f; page = g / (tiles_x * tiles_y), tile column = g % tiles_x, tile row = (g / tiles_x) % tiles_y"},
@@ -208,6 +205,60 @@ SchneiderExportSummary ExportSchneider(const SchneiderExportOptions& o, const Co
                                 half ? "half an ulp of a half float below 1, 2^-12, plus 2^-24 for the float32 rounding before it" : "half a step of 1/255")}};
   j["glsl"] = {{"file", "btf_schneider.glsl"}, {"function", "vec3 btf_eval(vec2 uv, vec3 wi, vec3 wo)"}};
   j["byte_order"] = "little-endian";
+  return j;
+}
+
+}  // namespace
+
+SchneiderExportSummary ExportSchneider(const SchneiderExportOptions& o, const Codec& codec,
+                                       const std::filesystem::path& out_dir, const Reporter& rep) {
+  o.Check();
+  if (codec.method() != CodecMethod::kLpca)
+    ThrowUsage("the schneider export needs an LPCA codec; this one is '{}' (compress with --method lpca; a pca-view "
+               "codec exports with --format sattler)",
+               MethodName(codec.method()));
+  if (codec.transform() != ValueTransform::kNone)
+    ThrowUsage("the schneider export needs a codec without value transform (the renderer sums weighted "
+               "functions linearly); compress without --log");
+  if (codec.lpca().clusters > 65535) ThrowUsage("the schneider export stores cluster indices in 16 bits (<= 65535 clusters)");
+  Timer timer;
+  SchneiderExportSummary s;
+  const LpcaModel& m = codec.lpca();
+  const int K = m.clusters, c = o.components < 0 ? m.components : std::min(o.components, m.components);
+  const int F = 1 + c, nv = o.view_grid, nl = o.light_grid, C = codec.channels(), L = codec.num_lights();
+  const std::size_t d = codec.abrdf_size(), T = std::size_t(codec.height()) * codec.width();
+  AtomicDirectory output(out_dir, "manifest.json");
+  const std::filesystem::path& dir = output.temp_path();
+
+  const std::vector<Interpolant> view_ip = GridInterpolants(codec.views(), nv);
+  const std::vector<Interpolant> light_ip = GridInterpolants(codec.lights(), nl);
+  const int G = K * F;
+  const SchneiderAtlas atlas = PlanAtlas(G, nv, nl, o.atlas_side);
+  const std::size_t atlas_values = std::size_t(atlas.pages) * atlas.depth * atlas.height * atlas.width * C;
+  const bool half = o.storage == "f16";
+  NormalisedStore store(half, atlas_values);
+  std::vector<float> scale_bias(std::size_t(G) * 2, 0.0f);
+  double max_q = 0;
+  for (int k = 0; k < K; ++k) {
+    rep.Progress(std::size_t(k), std::size_t(K), "resample");
+    for (int f = 0; f < F; ++f) {
+      const float* fn = f == 0 ? &m.means[std::size_t(k) * d] : &m.basis[(std::size_t(k) * m.components + f - 1) * d];
+      const std::vector<double> vals = ResampleFunction(fn, view_ip, light_ip, nv, nl, C, L);
+      max_q = std::max(max_q, StoreFunction(vals, k * F + f, atlas, nv, C, &store, &scale_bias));
+    }
+  }
+  s.times.Add("resample", timer.Seconds());
+  timer.Restart();
+  std::vector<float> terms;
+  std::vector<std::uint16_t> index;
+  FoldTerms(m, F, T, scale_bias, &terms, &index);
+  const std::string atlas_file = half ? "atlas.f16" : "atlas.u8";
+  s.texture_bytes = store.Write(dir / atlas_file);
+  s.weight_bytes = WriteBinary(dir / "terms.f32", terms);
+  s.index_bytes = WriteBinary(dir / "cluster_index.u16", index);
+  WriteBinary(dir / "scale_bias.f32", scale_bias);
+
+  const nlohmann::json j = SchneiderManifest(o, codec, atlas, K, F, atlas_file);
   WriteTextFileAtomic(dir / "btf_schneider.glsl", SchneiderGlsl(j));
   WriteTextFileAtomic(dir / "manifest.json", j.dump(2) + "\n");
   output.Commit();
@@ -221,8 +272,8 @@ SchneiderExportSummary ExportSchneider(const SchneiderExportOptions& o, const Co
   s.width = codec.width();
   s.channels = C;
   s.storage = o.storage;
-  s.atlas_width = AW, s.atlas_height = AH, s.atlas_depth = AD, s.atlas_pages = pages;
-  s.tiles_x = tiles_x, s.tiles_y = tiles_y;
+  s.atlas_width = atlas.width, s.atlas_height = atlas.height, s.atlas_depth = atlas.depth, s.atlas_pages = atlas.pages;
+  s.tiles_x = atlas.tiles_x, s.tiles_y = atlas.tiles_y;
   s.max_quantization_error = max_q;
   rep.Progress(std::size_t(K), std::size_t(K), "resample");
   return s;

@@ -7,6 +7,43 @@
 
 namespace btf {
 
+namespace {
+
+// The GLSL of SquareFromHemisphere (btf_square_from_hemisphere), inserted verbatim.
+constexpr const char kSquareFromHemisphereGlsl[] = R"(// The elevated concentric map's inverse (libbtf SquareFromHemisphere): hemisphere -> [0, 1]^2;
+// directions below the horizon are projected onto it.
+vec2 btf_square_from_hemisphere(vec3 w) {
+  w = normalize(w);
+  if (w.z < 0.0) {
+    float rxy = length(w.xy);
+    w = rxy > 0.0 ? vec3(w.xy / rxy, 0.0) : vec3(0.0, 0.0, 1.0);
+  }
+  vec2 d = w.xy / sqrt(1.0 + w.z);
+  float r = length(d);
+  if (r == 0.0) return vec2(0.5);
+  float phi = atan(d.y, d.x);
+  if (phi < -BTF_PI / 4.0) phi += 2.0 * BTF_PI;
+  float a, b;
+  if (phi < BTF_PI / 4.0) {
+    a = r;
+    b = a * phi / (BTF_PI / 4.0);
+  } else if (phi < 3.0 * BTF_PI / 4.0) {
+    b = r;
+    a = -b * (phi - BTF_PI / 2.0) / (BTF_PI / 4.0);
+  } else if (phi < 5.0 * BTF_PI / 4.0) {
+    a = -r;
+    b = a * (phi - BTF_PI) / (BTF_PI / 4.0);
+  } else {
+    b = -r;
+    a = -b * (phi - 1.5 * BTF_PI) / (BTF_PI / 4.0);
+  }
+  return vec2(a + 1.0, b + 1.0) * 0.5;
+}
+
+)";
+
+}  // namespace
+
 std::string SchneiderGlsl(const nlohmann::json& j) {
   const auto& a = j.at("atlas");
   const auto& fn = j.at("functions");
@@ -55,37 +92,7 @@ vec4 btf_page(int page, vec3 p) {{
 {page_fetch}  return vec4(0.0);
 }}
 
-// The elevated concentric map's inverse (libbtf SquareFromHemisphere): hemisphere -> [0, 1]^2;
-// directions below the horizon are projected onto it.
-vec2 btf_square_from_hemisphere(vec3 w) {{
-  w = normalize(w);
-  if (w.z < 0.0) {{
-    float rxy = length(w.xy);
-    w = rxy > 0.0 ? vec3(w.xy / rxy, 0.0) : vec3(0.0, 0.0, 1.0);
-  }}
-  vec2 d = w.xy / sqrt(1.0 + w.z);
-  float r = length(d);
-  if (r == 0.0) return vec2(0.5);
-  float phi = atan(d.y, d.x);
-  if (phi < -BTF_PI / 4.0) phi += 2.0 * BTF_PI;
-  float a, b;
-  if (phi < BTF_PI / 4.0) {{
-    a = r;
-    b = a * phi / (BTF_PI / 4.0);
-  }} else if (phi < 3.0 * BTF_PI / 4.0) {{
-    b = r;
-    a = -b * (phi - BTF_PI / 2.0) / (BTF_PI / 4.0);
-  }} else if (phi < 5.0 * BTF_PI / 4.0) {{
-    a = -r;
-    b = a * (phi - BTF_PI) / (BTF_PI / 4.0);
-  }} else {{
-    b = -r;
-    a = -b * (phi - 1.5 * BTF_PI) / (BTF_PI / 4.0);
-  }}
-  return vec2(a + 1.0, b + 1.0) * 0.5;
-}}
-
-// Trilinear fetch of function g in slab `slab`: (s_v, t_v) and s_l clamped to texel centres of
+{square_from_hemisphere}// Trilinear fetch of function g in slab `slab`: (s_v, t_v) and s_l clamped to texel centres of
 // the tile and slab, so the filter never reads a neighbouring tile or slab.
 vec3 btf_fetch(int g, float slab, vec2 v, float sl) {{
   int local = g % BTF_TILES_PER_PAGE;
@@ -127,7 +134,8 @@ vec3 btf_eval(vec2 uv, vec3 wi, vec3 wo) {{
                      fmt::arg("W", W), fmt::arg("H", H), fmt::arg("NT4", NT4), fmt::arg("F", F), fmt::arg("nv", nv),
                      fmt::arg("nl", nl), fmt::arg("tiles_x", tiles_x), fmt::arg("tiles_y", tiles_y),
                      fmt::arg("per_page", tiles_x * tiles_y), fmt::arg("samplers", samplers),
-                     fmt::arg("page_fetch", page_fetch), fmt::arg("swizzle", swizzle));
+                     fmt::arg("page_fetch", page_fetch), fmt::arg("swizzle", swizzle),
+                     fmt::arg("square_from_hemisphere", kSquareFromHemisphereGlsl));
 }
 
 }  // namespace btf

@@ -21,23 +21,10 @@
 namespace btf {
 
 enum class BonnFormat { kBdi, kDfmf, kFmf, kPvf };
-// "bdi", "dfmf", "fmf", "pvf".
-const char* BonnFormatName(BonnFormat format);
 
 // The epsilon of the logarithmic colour models and of FMF's dynamic-range reduction. No file
 // stores it; every public reader assumes this value.
 inline constexpr double kBonnEpsilon = 1e-5;
-
-// DFMF colour models (decorrelations) this reader undoes; others are refused (bad input).
-// 0 RGB, 1 YUV, 3 PCA, 4 YCoCg, 9 Ylog_UV, 10 Ylog_Ulog_Vlog, 11 Ylog_UdivY_VdivY, 12 log RGB.
-bool BonnColorModelSupported(int model);
-// "rgb", "yuv", "lab", "pca", "ycocg", "spectral", "spectral_linear", "ylog_uv", "ylog_ulog_vlog",
-// "ylog_udivy_vdivy", "log_rgb", or "unknown".
-std::string BonnColorModelName(int model);
-// Undoes colour model `model` on `n` pixels of 3 (or, for models 0 and 12, `channels`) values in
-// place. `mean` and `transform` (row-major) are used by model 3 only.
-void BonnUndecorrelate(int model, const std::array<float, 3>& mean, const std::array<float, 9>& transform,
-                       int channels, float* values, std::size_t n);
 
 // The signature at the start of `path` if it is a Bonn file ("!DFMF08FCR", ...), else "". A file
 // that starts with '!' followed by an unknown signature throws btf::Error (bad input).

@@ -1,7 +1,9 @@
 #pragma once
 // IEEE 754 binary16 ("half") <-> float32, bit exact and independent of the compiler's _Float16.
-// FloatToHalf rounds to nearest, ties to even (the rounding HDF5 uses for our float16 storage);
-// values beyond the half range become +-infinity, NaN stays NaN (quiet).
+// The one conversion of libbtf: float16 dataset storage, the BDI writer, half codec rows and the
+// renderer exports' HALF_FLOAT textures (header-only: the installed export reference decoders use it).
+// FloatToHalf rounds to nearest, ties to even; values beyond the half range become +-infinity,
+// NaN stays NaN (quiet, sign kept, payload dropped). HalfToFloat is exact (a NaN keeps sign and payload).
 #include <bit>
 #include <cstddef>
 #include <cstdint>

@@ -39,8 +39,9 @@ herr_t FindIoError(unsigned, const H5E_error2_t* e, void* found) {
     *static_cast<bool*>(found) = true;
   return 0;
 }
-}  // namespace
 
+// True when HDF5's current error stack holds a failed read or write system call (an I/O
+// error, not a damaged file).
 bool LastErrorWasIo() {
   bool found = false;
   H5Ewalk2(H5E_DEFAULT, H5E_WALK_DOWNWARD, FindIoError, &found);
@@ -48,7 +49,6 @@ bool LastErrorWasIo() {
   return found;
 }
 
-namespace {
 // HDF5 calls this when an API call fails: nothing is printed (we report errors ourselves), but
 // a failed system call underneath is remembered.
 herr_t NoteIoError(hid_t, void*) {
@@ -125,8 +125,8 @@ std::size_t Elements(const std::vector<hsize_t>& dims) {
   for (auto d : dims) n *= static_cast<std::size_t>(d);
   return n;
 }
-}  // namespace
 
+// Semantic version "MAJOR.MINOR.PATCH" -> MAJOR; -1 if malformed.
 int MajorVersion(const std::string& semver) {
   std::size_t pos = 0;
   int major = 0;
@@ -138,7 +138,6 @@ int MajorVersion(const std::string& semver) {
   return major;
 }
 
-namespace {
 // Refuses files without checksummed metadata before HDF5 parses them: libbtf writes superblock
 // version >= 2 (metadata checksums); older layouts carry no checksums, and HDF5 1.10.8 can
 // crash on damaged unchecksummed metadata.

@@ -135,8 +135,6 @@ class File {
   std::uint64_t failed_closes_at_create_ = 0;
 };
 
-// Semantic version "MAJOR.MINOR.PATCH" -> MAJOR; -1 if malformed.
-int MajorVersion(const std::string& semver);
 // The HDF5 type used for Storage::kFloat16 (IEEE binary16, little-endian).
 hid_t HalfType();
 // Turns off HDF5's automatic error printing (we report errors ourselves) and makes HDF5 note
@@ -149,9 +147,6 @@ bool IoErrorSeen();
 // damaged (bad input) after IoErrorSeen() is a failing disk, not bad data, so it becomes an I/O
 // error (exit 4) whose message says so; any other error is returned unchanged.
 Error ReportedError(const Error& e);
-// True when HDF5's current error stack holds a failed read or write system call (an I/O
-// error, not a damaged file).
-bool LastErrorWasIo();
 // Throws btf::Error for a failed read of `what` (e.g. "dataset 'x'") in `path`: I/O when the
 // read system call failed, bad input (truncated or corrupt file) otherwise.
 [[noreturn]] void ThrowUnreadable(const std::string& path, const std::string& what);

@@ -1,5 +1,5 @@
 #pragma once
-// Reading a chunked float dataset without HDF5's filter pipeline (issue 15): the raw bytes of the
+// Reading a chunked float dataset without HDF5's filter pipeline: the raw bytes of the
 // chunks are read with H5Dread_chunk on the calling thread (the only thread that calls HDF5), then
 // each chunk is checked (Fletcher-32), inflated (libdeflate), unshuffled and converted to float on
 // the compute threads (OpenMP). File::ReadSlab uses it for the datasets libbtf writes

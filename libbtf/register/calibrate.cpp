@@ -39,6 +39,110 @@ double Median(std::vector<double> v) {
   return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
 }
 
+// The board points seen in one photo and where: the corners of the board's markers, or with
+// ChArUco the chessboard corners between them (z = 0: the board is planar).
+struct Correspondences {
+  std::vector<cv::Point3f> object;
+  std::vector<cv::Point2f> image;
+  int markers = 0;  // board markers detected
+};
+
+Correspondences FindCorrespondences(const Image& im, const TagDetector& detector, const Board& board,
+                                    const std::map<int, const Marker*>& by_id, bool charuco) {
+  Correspondences c;
+  const std::vector<TagDetection> dets = detector.Detect(im);
+  for (const auto& d : dets) {
+    const auto it = by_id.find(d.id);
+    if (it == by_id.end()) continue;
+    ++c.markers;
+    for (int k = 0; k < 4 && !charuco; ++k) {
+      c.object.emplace_back(static_cast<float>(it->second->corners_mm[k].x()), static_cast<float>(it->second->corners_mm[k].y()), 0.0f);
+      c.image.emplace_back(static_cast<float>(d.corners[k].x()), static_cast<float>(d.corners[k].y()));
+    }
+  }
+  if (charuco)
+    for (const auto& cc : DetectCharucoCorners(im, board.charuco, dets)) {
+      c.object.emplace_back(static_cast<float>(cc.board_mm.x()), static_cast<float>(cc.board_mm.y()), 0.0f);
+      c.image.emplace_back(static_cast<float>(cc.pixel.x()), static_cast<float>(cc.pixel.y()));
+    }
+  return c;
+}
+
+// OpenCV's camera fit of one model over the used photos' correspondences.
+struct CameraFit {
+  cv::Mat K, dist;
+  std::vector<cv::Mat> rvecs, tvecs;
+  double rms_px = 0;
+};
+
+CameraFit FitCamera(const std::string& model, const std::vector<std::vector<cv::Point3f>>& object,
+                    const std::vector<std::vector<cv::Point2f>>& image, const cv::Size& size) {
+  CameraFit f;
+  const cv::TermCriteria crit(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 200, 1e-12);
+  if (model == "radtan") {
+    f.rms_px = cv::calibrateCamera(object, image, size, f.K, f.dist, f.rvecs, f.tvecs, 0, crit);
+    return f;
+  }
+  std::vector<std::vector<cv::Point3d>> obj_d(object.size());
+  std::vector<std::vector<cv::Point2d>> img_d(image.size());
+  for (std::size_t i = 0; i < object.size(); ++i) {
+    for (const auto& p : object[i]) obj_d[i].emplace_back(p.x, p.y, p.z);
+    for (const auto& p : image[i]) img_d[i].emplace_back(p.x, p.y);
+  }
+  try {
+    // OpenCV's own start (f = max(w, h) / pi, no distortion) does not converge on such views:
+    // start from the pinhole intrinsics of a radtan fit.
+    cv::Mat K0, d0;
+    std::vector<cv::Mat> r0, t0;
+    cv::calibrateCamera(object, image, size, K0, d0, r0, t0, 0, crit);
+    f.K = K0.clone();
+    f.dist = cv::Mat::zeros(4, 1, CV_64F);
+    f.rms_px = cv::fisheye::calibrate(obj_d, img_d, size, f.K, f.dist, f.rvecs, f.tvecs,
+                                      cv::fisheye::CALIB_RECOMPUTE_EXTRINSIC | cv::fisheye::CALIB_FIX_SKEW |
+                                          cv::fisheye::CALIB_USE_INTRINSIC_GUESS,
+                                      crit);
+  } catch (const cv::Exception& e) {
+    ThrowBadInput("calibrate: the fisheye fit failed ({}): too few or too similar views", e.err);
+  }
+  return f;
+}
+
+// The fitted intrinsics as a CameraModel.
+CameraModel CameraOfFit(const std::string& model, int width, int height, const CameraFit& f) {
+  CameraModel c;
+  c.model = model;
+  c.width = width, c.height = height;
+  c.fx = f.K.at<double>(0, 0), c.fy = f.K.at<double>(1, 1), c.cx = f.K.at<double>(0, 2), c.cy = f.K.at<double>(1, 2);
+  const auto coef = [&](int i) { return i < static_cast<int>(f.dist.total()) ? f.dist.at<double>(i) : 0.0; };
+  if (model == "radtan") {
+    c.k1 = coef(0), c.k2 = coef(1), c.p1 = coef(2), c.p2 = coef(3), c.k3 = coef(4);
+  } else {
+    c.k1 = coef(0), c.k2 = coef(1), c.k3 = coef(2), c.k4 = coef(3);
+  }
+  return c;
+}
+
+// The reprojection RMS (px) of used photo i under the fit.
+double ReprojectionRms(const std::string& model, const CameraFit& f, const std::vector<cv::Point3f>& object,
+                       const std::vector<cv::Point2f>& image, std::size_t i) {
+  std::vector<cv::Point2f> proj;
+  if (model == "radtan") {
+    cv::projectPoints(object, f.rvecs[i], f.tvecs[i], f.K, f.dist, proj);
+  } else {
+    std::vector<cv::Point3d> od;
+    for (const auto& p : object) od.emplace_back(p.x, p.y, p.z);
+    std::vector<cv::Point2d> pd;
+    cv::fisheye::projectPoints(od, pd, f.rvecs[i], f.tvecs[i], f.K, f.dist);
+    for (const auto& p : pd) proj.emplace_back(static_cast<float>(p.x), static_cast<float>(p.y));
+  }
+  double ss = 0;
+  for (std::size_t k = 0; k < proj.size(); ++k) {
+    const double dx = proj[k].x - image[k].x, dy = proj[k].y - image[k].y;
+    ss += dx * dx + dy * dy;
+  }
+  return std::sqrt(ss / static_cast<double>(proj.size()));
+}
+
 }  // namespace
 
 void CalibrateOptions::Check() const {
@@ -143,24 +247,9 @@ CalibrateSummary CalibrateCamera(const CalibrateOptions& o, const std::vector<st
       ThrowBadInput("calibrate: '{}' is {} x {} px but '{}' is {} x {}: all photos must come from one camera setting",
                     v.file, im.width, im.height, size_from, width, height);
     }
-    std::vector<cv::Point3f> obj;
-    std::vector<cv::Point2f> img;
-    const std::vector<TagDetection> dets = detector.Detect(im);
-    for (const auto& d : dets) {
-      const auto it = by_id.find(d.id);
-      if (it == by_id.end()) continue;
-      ++v.markers;
-      for (int k = 0; k < 4 && !charuco; ++k) {
-        obj.emplace_back(static_cast<float>(it->second->corners_mm[k].x()), static_cast<float>(it->second->corners_mm[k].y()), 0.0f);
-        img.emplace_back(static_cast<float>(d.corners[k].x()), static_cast<float>(d.corners[k].y()));
-      }
-    }
-    if (charuco)
-      for (const auto& c : DetectCharucoCorners(im, board.charuco, dets)) {
-        obj.emplace_back(static_cast<float>(c.board_mm.x()), static_cast<float>(c.board_mm.y()), 0.0f);
-        img.emplace_back(static_cast<float>(c.pixel.x()), static_cast<float>(c.pixel.y()));
-      }
-    v.corners = static_cast<int>(obj.size());
+    Correspondences corr = FindCorrespondences(im, detector, board, by_id, charuco);
+    v.markers = corr.markers;
+    v.corners = static_cast<int>(corr.object.size());
     if (v.markers < o.min_markers) {
       v.error = fmt::format("{} board markers found, at least {} needed (min_markers)", v.markers, o.min_markers);
     } else if (v.corners < o.min_corners) {
@@ -168,8 +257,8 @@ CalibrateSummary CalibrateCamera(const CalibrateOptions& o, const std::vector<st
                             charuco ? "chessboard " : "", o.min_corners);
     } else {
       v.used = true;
-      object.push_back(std::move(obj));
-      image.push_back(std::move(img));
+      object.push_back(std::move(corr.object));
+      image.push_back(std::move(corr.image));
       view_of.push_back(static_cast<int>(sum.views.size()));
     }
     sum.views.push_back(std::move(v));
@@ -185,67 +274,16 @@ CalibrateSummary CalibrateCamera(const CalibrateOptions& o, const std::vector<st
   }
 
   t.Restart();
-  cv::Mat K, dist;
-  std::vector<cv::Mat> rvecs, tvecs;
-  const cv::Size size(width, height);
-  const cv::TermCriteria crit(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 200, 1e-12);
-  if (o.model == "radtan") {
-    sum.camera.rms_px = cv::calibrateCamera(object, image, size, K, dist, rvecs, tvecs, 0, crit);
-  } else {
-    std::vector<std::vector<cv::Point3d>> obj_d(object.size());
-    std::vector<std::vector<cv::Point2d>> img_d(image.size());
-    for (std::size_t i = 0; i < object.size(); ++i) {
-      for (const auto& p : object[i]) obj_d[i].emplace_back(p.x, p.y, p.z);
-      for (const auto& p : image[i]) img_d[i].emplace_back(p.x, p.y);
-    }
-    try {
-      // OpenCV's own start (f = max(w, h) / pi, no distortion) does not converge on such views:
-      // start from the pinhole intrinsics of a radtan fit.
-      cv::Mat K0, d0;
-      std::vector<cv::Mat> r0, t0;
-      cv::calibrateCamera(object, image, size, K0, d0, r0, t0, 0, crit);
-      K = K0.clone();
-      dist = cv::Mat::zeros(4, 1, CV_64F);
-      sum.camera.rms_px = cv::fisheye::calibrate(obj_d, img_d, size, K, dist, rvecs, tvecs,
-                                                 cv::fisheye::CALIB_RECOMPUTE_EXTRINSIC | cv::fisheye::CALIB_FIX_SKEW |
-                                                     cv::fisheye::CALIB_USE_INTRINSIC_GUESS,
-                                                 crit);
-    } catch (const cv::Exception& e) {
-      ThrowBadInput("calibrate: the fisheye fit failed ({}): too few or too similar views", e.err);
-    }
-  }
-  if (K.empty() || !std::isfinite(sum.camera.rms_px)) ThrowBadInput("calibrate: the fit failed (degenerate views)");
-  CameraModel& c = sum.camera.camera;
-  c.model = o.model;
-  c.width = width, c.height = height;
-  c.fx = K.at<double>(0, 0), c.fy = K.at<double>(1, 1), c.cx = K.at<double>(0, 2), c.cy = K.at<double>(1, 2);
-  const auto coef = [&](int i) { return i < static_cast<int>(dist.total()) ? dist.at<double>(i) : 0.0; };
-  if (o.model == "radtan") {
-    c.k1 = coef(0), c.k2 = coef(1), c.p1 = coef(2), c.p2 = coef(3), c.k3 = coef(4);
-  } else {
-    c.k1 = coef(0), c.k2 = coef(1), c.k3 = coef(2), c.k4 = coef(3);
-  }
+  const CameraFit fit = FitCamera(o.model, object, image, cv::Size(width, height));
+  sum.camera.rms_px = fit.rms_px;
+  if (fit.K.empty() || !std::isfinite(sum.camera.rms_px)) ThrowBadInput("calibrate: the fit failed (degenerate views)");
+  sum.camera.camera = CameraOfFit(o.model, width, height, fit);
   // Per-photo reprojection RMS; outliers against the median.
   std::vector<double> rms;
   for (std::size_t i = 0; i < object.size(); ++i) {
-    std::vector<cv::Point2f> proj;
-    if (o.model == "radtan") {
-      cv::projectPoints(object[i], rvecs[i], tvecs[i], K, dist, proj);
-    } else {
-      std::vector<cv::Point3d> od;
-      for (const auto& p : object[i]) od.emplace_back(p.x, p.y, p.z);
-      std::vector<cv::Point2d> pd;
-      cv::fisheye::projectPoints(od, pd, rvecs[i], tvecs[i], K, dist);
-      for (const auto& p : pd) proj.emplace_back(static_cast<float>(p.x), static_cast<float>(p.y));
-    }
-    double ss = 0;
-    for (std::size_t k = 0; k < proj.size(); ++k) {
-      const double dx = proj[k].x - image[i][k].x, dy = proj[k].y - image[i][k].y;
-      ss += dx * dx + dy * dy;
-    }
-    rms.push_back(std::sqrt(ss / static_cast<double>(proj.size())));
+    rms.push_back(ReprojectionRms(o.model, fit, object[i], image[i], i));
     sum.views[static_cast<std::size_t>(view_of[i])].rms_px = rms.back();
-    sum.corners_used += static_cast<int>(proj.size());
+    sum.corners_used += static_cast<int>(object[i].size());
   }
   const double med = Median(rms);
   for (std::size_t i = 0; i < rms.size(); ++i)

@@ -104,22 +104,9 @@ bool ClassicFamily(const std::string& name) {
   return name == "tag16h5" || name == "tag25h9" || name == "tag36h10" || name == "tag36h11";
 }
 
-}  // namespace
-
 bool IsArucoFamily(const std::string& family) { return family.rfind(kArucoPrefix, 0) == 0; }
 
-int DetectionSquareModules(const std::string& family, int border_bits) {
-  if (IsArucoFamily(family)) {
-    const cv::Ptr<cv::aruco::Dictionary> d =
-        cv::aruco::getPredefinedDictionary(static_cast<cv::aruco::PREDEFINED_DICTIONARY_NAME>(FindAruco(family)));
-    return d->markerSize + 2 * border_bits;
-  }
-  const FamilyEntry& e = FindFamily(family);
-  apriltag_family_t* f = e.create();
-  const int w = f->width_at_border + 2 * (border_bits - 1);
-  e.destroy(f);
-  return w;
-}
+}  // namespace
 
 void TagDetectorOptions::Check() const {
   if (IsArucoFamily(family)) {
@@ -412,10 +399,17 @@ double Bilinear(const std::vector<float>& g, int w, int h, double x, double y, b
 
 std::vector<unsigned char> GrayForDetection(const Image& image) { return Quantize(LinearGray(image)); }
 
+namespace {
 
-
+// Sub-pixel corner refinement used by Detect(const Image&) when refine_corners is set: along each
+// edge of the quad, the 50% crossing between the black border level (half a module inside) and
+// the quiet-zone level (half a module outside) is located on profiles normal to the edge in the
+// linear gray image (exact for a straight edge under any symmetric blur); a total-least-squares
+// line per edge; corners = intersections of adjacent lines. Two passes. `modules` = the family's
+// width_at_border. Returns false (corners unchanged) if an edge has too few valid profiles or a
+// corner would move by more than `max_move_px`.
 bool RefineTagCorners(const std::vector<float>& gray, int w, int h, int modules, std::array<Vec2, 4>* corners,
-                      double max_move_px) {
+                      double max_move_px = 3.0) {
   if (w < 2 || h < 2) return false;
   for (int pass = 0; pass < 2; ++pass) {
     std::array<Vec2, 4>& c = *corners;
@@ -481,6 +475,8 @@ bool RefineTagCorners(const std::vector<float>& gray, int w, int h, int modules,
   }
   return true;
 }
+
+}  // namespace
 
 void CharucoOptions::Check() const {
   BTF_CHECK_OPTION(max_window_px >= 2 && max_window_px <= 64, "max_window_px", "2..64");

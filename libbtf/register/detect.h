@@ -53,11 +53,6 @@ struct TagDetection {
 
 // Families this build can create (libapriltag's, then "aruco:DICT_..." names).
 std::vector<std::string> TagFamilies();
-bool IsArucoFamily(const std::string& family);
-
-// Modules across the detection square (outer edge of the black border) of `family` with a border
-// of `border_bits` modules (tag36h11: 8 with 1 bit, 10 with 2).
-int DetectionSquareModules(const std::string& family, int border_bits);
 
 // One libapriltag detector and family instance. Not thread-safe: use one per thread (notes 1.5).
 class TagDetector {
@@ -81,16 +76,6 @@ class TagDetector {
   std::unique_ptr<Impl> impl_;
   TagDetectorOptions options_;
 };
-
-// Sub-pixel corner refinement used by Detect(const Image&) when refine_corners is set: along each
-// edge of the quad, the 50% crossing between the black border level (half a module inside) and
-// the quiet-zone level (half a module outside) is located on profiles normal to the edge in the
-// linear gray image (exact for a straight edge under any symmetric blur); a total-least-squares
-// line per edge; corners = intersections of adjacent lines. Two passes. `modules` = the family's
-// width_at_border. Returns false (corners unchanged) if an edge has too few valid profiles or a
-// corner would move by more than `max_move_px`.
-bool RefineTagCorners(const std::vector<float>& gray, int width, int height, int modules, std::array<Vec2, 4>* corners,
-                      double max_move_px = 3.0);
 
 // ChArUco chessboard corners (OpenCV 4.6 aruco): the board's markers, detected by a TagDetector of
 // its family ("aruco:DICT_..."), give each inner corner a first position through the local

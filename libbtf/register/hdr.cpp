@@ -146,10 +146,16 @@ void ApplyResponse(Image& codes, const ResponseCurve& curve, const std::string& 
     codes.pixels[i] = CodeToLinear(curve, static_cast<int>(i % static_cast<std::size_t>(codes.channels)), codes.pixels[i]);
 }
 
+namespace {
+
+// True if a stored value (as MergeBracket's `stored`) is clipped: >= options.saturation of full
+// scale (or NaN), or with a curve, beyond its last constrained code.
 bool IsClipped(float stored, const ResponseCurve& curve, const HdrOptions& o) {
   if (!(stored < o.saturation)) return true;                                 // clipped (NaN too)
   return !curve.empty() && 255.0 * stored > curve.max_code + 0.5;           // beyond the curve's data: as clipped
 }
+
+}  // namespace
 
 HdrMerge ClippedPixels(const Image& stored, const ResponseCurve& curve, const HdrOptions& o) {
   HdrMerge m;

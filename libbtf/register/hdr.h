@@ -58,12 +58,9 @@ struct HdrMerge {
   std::size_t clipped_pixels = 0;
 };
 
-// True if a stored value (as MergeBracket's `stored`) is clipped: >= options.saturation of full
-// scale (or NaN), or with a curve, beyond its last constrained code.
-bool IsClipped(float stored, const ResponseCurve& curve, const HdrOptions& options);
-
-// A single photo's clipped pixels (IsClipped in some channel): `clipped` and `clipped_pixels` set,
-// `radiance` left empty.
+// A single photo's clipped pixels (a stored value >= options.saturation of full scale, NaN, or
+// with a curve beyond its last constrained code, in some channel): `clipped` and `clipped_pixels`
+// set, `radiance` left empty.
 HdrMerge ClippedPixels(const Image& stored, const ResponseCurve& curve, const HdrOptions& options);
 
 // Merges one bracket: `stored` are the photos' values as read (decoded linear when `curve` is

@@ -101,6 +101,10 @@ Vec2 TexelCenterMm(double col, double row, int n, double s) {
   return Vec2(-s / 2 + (col + 0.5) * s / n, s / 2 - (row + 0.5) * s / n);
 }
 
+namespace {
+
+// Bilinear sample, OpenCV pixel-center convention, clamped to the edge; returns false if (x, y)
+// is more than half a pixel outside the image.
 bool SampleBilinear(const Image& im, double x, double y, float* out) {
   const bool inside = x >= -0.5 && y >= -0.5 && x <= im.width - 0.5 && y <= im.height - 0.5;
   x = std::clamp(x, 0.0, static_cast<double>(im.width - 1));
@@ -115,6 +119,8 @@ bool SampleBilinear(const Image& im, double x, double y, float* out) {
   }
   return inside;
 }
+
+}  // namespace
 
 Image Rectify(const Image& photo, const PlateToPixel& project, double s, const RectifyOptions& options,
               RectifyStats* stats) {

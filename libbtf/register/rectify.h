@@ -67,8 +67,4 @@ SplineImage HistopolatingSpline(const Image& image);
 // pixel outside.
 bool SampleSpline(const SplineImage& spline, double x, double y, float* out);
 
-// Bilinear sample, OpenCV pixel-center convention, clamped to the edge; returns false if (x, y)
-// is more than half a pixel outside the image.
-bool SampleBilinear(const Image& image, double x, double y, float* out);
-
 }  // namespace btf

@@ -16,28 +16,15 @@
 
 #include "libbtf/core/error.h"
 #include "libbtf/io/json_util.h"
+#include "libbtf/register/photo_loader.h"
 #include "libbtf/register/radiometry.h"
 
 namespace btf {
 namespace {
 
 using json = nlohmann::json;
-
-
-// Reads a photo; non-finite values become 0 (counted in a warning) so nothing non-finite escapes.
-// A photo named by the manifest but missing is the manifest's problem (bad input, reported per
-// photo); one that exists and cannot be read is a failing disk (I/O: ends the run).
-Image ReadPhoto(const std::filesystem::path& path, std::vector<std::string>* warnings, const ImageReadOptions& input) {
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec)) ThrowBadInput("'{}': no such photo file", path.string());
-  Image im = ReadImage(path, input);
-  if (im.width < 2 || im.height < 2 || im.channels < 1) ThrowBadInput("'{}': empty image", path.string());
-  std::size_t bad = 0;
-  for (float& v : im.pixels)
-    if (!std::isfinite(v)) v = 0, ++bad;
-  if (bad && warnings) warnings->push_back(fmt::format("{} non-finite pixel values replaced by 0", bad));
-  return im;
-}
+using register_detail::PhotoLoader;
+using register_detail::ReadPhoto;
 
 // Both maps evaluated on an 11 x 11 grid over the sample at z = 0; returns RMS and max px.
 std::pair<double, double> HomographyError(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b, double s) {
@@ -268,12 +255,165 @@ std::vector<TagDetection> DetectInImage(const std::filesystem::path& image, cons
 
 namespace {
 
+// The photo's detected corners and fitted homography against the ground truth (synthetic photos).
+void CompareWithTruth(const PhotoTruth& truth, const PhotoGeometry& g, double S, PhotoReport& r) {
+  double ss = 0;
+  int n = 0;
+  for (const auto& d : r.detections)
+    if (auto c = truth.marker_corners_px.find(d.id); c != truth.marker_corners_px.end())
+      for (int k = 0; k < 4; ++k) ss += (d.corners[k] - c->second[k]).squaredNorm(), ++n;
+  if (n) r.truth_corner_rms_px = std::sqrt(ss / n);
+  std::tie(r.truth_homography_rms_px, r.truth_homography_max_px) =
+      HomographyError(g.image_from_plate, truth.image_from_plate, S);
+}
+
+// The whole sample must be in view: its border projects inside the photo (the map is a
+// homography plus radial distortion, so the border bounds the region).
+void CheckSampleInView(const PhotoGeometry& g, double S, const Image& im) {
+  for (int k = 0; k < 4 * 32; ++k) {
+    const double s = (k % 32 + 0.5) / 32 * S - S / 2;
+    const Vec2 q = k < 32 ? Vec2(s, -S / 2) : k < 64 ? Vec2(S / 2, s) : k < 96 ? Vec2(-s, S / 2) : Vec2(-S / 2, -s);
+    Vec2 px;
+    if (!g.Project(Vec3(q.x(), q.y(), 0), &px) || px.x() < -0.5 || px.y() < -0.5 || px.x() > im.width - 0.5 ||
+        px.y() > im.height - 0.5)
+      ThrowBadInput("the sample region is not fully inside the photo (plate point ({:.1f}, {:.1f}) mm maps to "
+                    "pixel ({:.1f}, {:.1f}))",
+                    q.x(), q.y(), px.x(), px.y());
+  }
+}
+
+// A photo whose every texel is masked (hidden or clipped, as counted in r): what to do about it.
+[[noreturn]] void ThrowAllMasked(const PhotoEntry& entry, const PhotoReport& r, const HdrOptions& hdr,
+                                 const ResponseCurve& response) {
+  std::string files;
+  for (const auto& b : entry.brackets) files += (files.empty() ? "'" : ", '") + b.file + "'";
+  const std::string limit = fmt::format("stored value >= {} of full scale{}", hdr.saturation,
+                                        response.empty() ? "" : fmt::format(" or code > {}, the response curve's last constrained code", response.max_code));
+  ThrowBadInput("every texel of the sample is masked ({} hidden behind raised markers, {} clipped{}{}{}): {}",
+                r.masked_hidden, r.masked_clipped, files.empty() ? " (" : " in every exposure of the bracket (",
+                files.empty() ? limit : files + "; " + limit, ")",
+                r.masked_clipped == 0 ? "use a view where the sample is visible"
+                                      : (files.empty() ? "lower the exposure or add a bracket" : "add a shorter exposure"));
+}
+
+// The images (n x n, `channels` each) averaged over their channels and lights, each light
+// normalized by its mean so that no single bright light dominates.
+std::vector<float> NormalizedGray(const std::map<int, const Image*>& by_light, int channels) {
+  const int n = by_light.begin()->second->width;
+  std::vector<float> gray(static_cast<std::size_t>(n) * n, 0.0f);
+  for (const auto& [l, im] : by_light) {
+    double mean = 0;
+    for (float x : im->pixels) mean += x;
+    mean = mean > 0 ? mean / static_cast<double>(im->pixels.size()) : 1;
+    for (std::size_t p = 0; p < gray.size(); ++p) {
+      double g = 0;
+      for (int c = 0; c < channels; ++c) g += im->pixels[p * channels + c];
+      gray[p] += static_cast<float>(g / (channels * mean));
+    }
+  }
+  return gray;
+}
+
+// The registered dataset's description: units, channel names, texel size (of the unit tile's
+// samples with tile output "tile": `width` of them across the lattice's longer side) and provenance.
+DatasetInfo RegisteredDatasetInfo(const RegisterOptions& o, const std::optional<Lattice>& lattice, int channels,
+                                  int width, double S, const std::string& manifest, const std::string& board) {
+  DatasetInfo info;
+  info.units = o.radiometry ? "brdf_per_sr" : "relative";
+  info.cos_theta_i_included = false;
+  info.channel_names = channels == 3 ? std::vector<std::string>{"R", "G", "B"}
+                                     : channels == 1 ? std::vector<std::string>{"Y"} : std::vector<std::string>{};
+  if (info.channel_names.empty())
+    for (int c = 0; c < channels; ++c) info.channel_names.push_back(fmt::format("C{}", c));
+  info.texel_size_mm = S / o.rectify.resolution;
+  if (o.tile_average && o.tile_output == "tile")
+    info.texel_size_mm *= std::max(lattice->a1.norm(), lattice->a2.norm()) / width;
+  info.provenance = {{"creator", "btf-register"},
+                     {"manifest", manifest},
+                     {"board", board},
+                     {"sample_size_mm", S},
+                     {"resolution", o.rectify.resolution},
+                     {"radiometry", o.radiometry},
+                     {"tile_average", o.tile_average},
+                     {"tile_output", o.tile_output}};
+  if (lattice) info.provenance["lattice"] = lattice->ToJson();
+  if (o.tile_average) info.provenance["tile_method"] = o.tile_method;
+  return info;
+}
+
+// One photo's unit tile reconstructed from its pixels (ReconstructTile), in the units of
+// RectifyPhoto's normtexture (the radiometric factor of entry e, its exposure that of `merged`,
+// evaluated at each pixel's plate point), with RectifyPhoto's masks per pixel: hidden behind a
+// raised marker, clipped.
+ReconstructedTile ReconstructPhotoTile(const HdrMerge& merged, const PhotoEntry& e, const PhotoGeometry& g,
+                                       const Board& board, double S, const RegisterOptions& o, const Lattice& lattice) {
+  std::vector<std::uint8_t> clipped;
+  if (merged.clipped_pixels > 0)
+    for (float c : merged.clipped.pixels) clipped.push_back(c > 0);
+  TilePhoto tp;
+  tp.photo = &merged.radiance;
+  tp.project = [&g](const Vec2& p, Vec2* px) { return g.Project(Vec3(p.x(), p.y(), 0), px); };
+  tp.sample_size_mm = S;
+  tp.resolution = o.rectify.resolution;
+  tp.scale = [&](const Vec2& p) { return 1.0 / (e.exposure * (o.radiometry ? IrradianceAt(e, p) : 1.0)); };
+  if (g.has_pose)
+    tp.hidden = [&, cam = CameraCenter(g)](const Vec2& p) { return HiddenByMarker(board, cam, Vec3(p.x(), p.y(), 0)); };
+  tp.pixel_mask = clipped.empty() ? nullptr : &clipped;
+  return ReconstructTile(tp, lattice, o.reconstruct);
+}
+
+// What the parallel loops over photos share: thread-safe progress (a cancellation stops the
+// remaining iterations) and the first I/O error. A photo that cannot be read (a failing disk, not
+// a bad photo) ends the run with an I/O error (exit 4) instead of being left out.
+class ParallelLoop {
+ public:
+  explicit ParallelLoop(const Reporter& reporter) : rep_(reporter) {}
+
+  void RestartCount() { done_ = 0; }
+  bool cancelled() const { return cancelled_; }
+  void Cancel() { cancelled_ = true; }
+
+  // Called in a catch block of the loop: keeps the first I/O error and skips the remaining
+  // iterations.
+  void KeepIoError() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!io_error_) io_error_ = std::current_exception();
+    cancelled_ = true;
+  }
+
+  // One more iteration done.
+  void Progress(const char* stage, int total) {
+    const int d = ++done_;
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (cancelled_) return;
+    try {
+      rep_.Progress(static_cast<std::size_t>(d), static_cast<std::size_t>(total), stage);
+    } catch (const Cancelled&) {
+      cancelled_ = true;
+    }
+  }
+
+  // After the loop: throws the kept I/O error, or Cancelled after a cancellation.
+  void Finish() {
+    if (io_error_) std::rethrow_exception(io_error_);
+    if (cancelled_) throw Cancelled();
+  }
+
+ private:
+  const Reporter& rep_;
+  std::atomic<bool> cancelled_{false};
+  std::exception_ptr io_error_;
+  std::atomic<int> done_{0};
+  std::mutex mutex_;
+};
+
 // Runs the pipeline's phases; one member function each, in RegisterPhotos' order.
 class Registration {
  public:
   Registration(const RegisterOptions& options, const std::filesystem::path& manifest_path, const Reporter& reporter,
                RegisterSummary& sum)
-      : o_(options), manifest_path_(manifest_path), dir_(manifest_path.parent_path()), rep_(reporter), sum_(sum) {}
+      : o_(options), manifest_path_(manifest_path), dir_(manifest_path.parent_path()), rep_(reporter), sum_(sum),
+        loop_(reporter) {}
 
   // Fail fast on malformed inputs, before any work.
   void ReadInputs() {
@@ -290,10 +430,11 @@ class Registration {
       ThrowBadInput("'{}': sample_size_mm is 0 (a calibration target, not a sample plate): registration needs the "
                     "sample region's side",
                     (dir_ / manifest_.board_file).string());
-    input_ = o_.input;
-    if (input_.colorspace == "auto" && !manifest_.transfer.empty()) input_.colorspace = manifest_.transfer;
-    if (o_.hdr.response != "linear") RecoverResponseCurve();
-    ReadReferenceFrames();
+    ImageReadOptions input = o_.input;
+    if (input.colorspace == "auto" && !manifest_.transfer.empty()) input.colorspace = manifest_.transfer;
+    loader_ = std::make_unique<PhotoLoader>(manifest_, manifest_path_, input, o_.hdr);
+    sum_.response = loader_->response();
+    sum_.response_files = loader_->response_files();
     if (!o_.camera.empty()) {
       const CameraFile cf = ReadCameraFile(o_.camera);
       for (auto& e : manifest_.photos) e.camera = cf.camera;
@@ -319,10 +460,10 @@ class Registration {
     const int np = sum_.photos;
     geoms_.assign(static_cast<std::size_t>(np), PhotoGeometry());
     std::vector<std::unique_ptr<TagDetector>> detectors(static_cast<std::size_t>(omp_get_max_threads()));
-    done_ = 0;
+    loop_.RestartCount();
 #pragma omp parallel for schedule(dynamic, 1)
     for (int i = 0; i < np; ++i) {
-      if (cancelled_) continue;
+      if (loop_.cancelled()) continue;
       PhotoReport& r = sum_.reports[i];
       try {
         auto& det = detectors[static_cast<std::size_t>(omp_get_thread_num())];
@@ -330,19 +471,18 @@ class Registration {
         geoms_[i] = FitPhoto(manifest_.photos[i], *det, r);
         r.ok = true;
       } catch (const Cancelled&) {
-        cancelled_ = true;
+        loop_.Cancel();
       } catch (const Error& ex) {
         r.ok = false;
         r.error = ex.what();
-        if (ex.code() == ExitCode::kIo) KeepIoError();
+        if (ex.code() == ExitCode::kIo) loop_.KeepIoError();
       } catch (const std::exception& ex) {
         r.ok = false;
         r.error = fmt::format("internal error: {}", ex.what());
       }
-      Progress("detect", np);
+      loop_.Progress("detect", np);
     }
-    RethrowIoError();
-    if (cancelled_) throw Cancelled();
+    loop_.Finish();
   }
 
   // The dataset's samplings: views and lights with at least one registered photo; the reference
@@ -374,7 +514,7 @@ class Registration {
     for (int v : view_list_)
       if (v != reference_) order.push_back(v);
     thumbs_.assign(view_list_.size(), Image());
-    done_ = 0;
+    loop_.RestartCount();
     for (int v : order) {
       Timer t;
       std::vector<Image> tex;
@@ -411,139 +551,10 @@ class Registration {
   }
 
  private:
-  // The camera response from the first bracket of the manifest; every photo is then read as
-  // stored (raw codes) and mapped through it.
-  void RecoverResponseCurve() {
-    if (manifest_.bit_depth != 8)
-      ThrowBadInput("'{}': --hdr-response {} recovers the response of 8-bit photos; this manifest's bit_depth is {} "
-                    "(use --hdr-response linear for linear data)",
-                    manifest_path_.string(), o_.hdr.response, manifest_.bit_depth);
-    const auto first = std::find_if(manifest_.photos.begin(), manifest_.photos.end(),
-                                    [](const PhotoEntry& e) { return e.brackets.size() >= 2; });
-    if (first == manifest_.photos.end())
-      ThrowBadInput("'{}': --hdr-response {} needs an exposure bracket ('brackets' in a photo entry) to recover the "
-                    "response from; the manifest has none",
-                    manifest_path_.string(), o_.hdr.response);
-    input_.colorspace = "linear";
-    std::vector<Image> codes;
-    std::vector<double> exposures;
-    for (const auto& b : first->brackets) {
-      codes.push_back(ReadPhoto(dir_ / b.file, nullptr, input_));
-      exposures.push_back(b.exposure);
-      sum_.response_files.push_back(b.file);
-    }
-    sum_.response = RecoverResponse(codes, exposures, o_.hdr, fmt::format("'{}' (bracket of photos[{}])",
-                                                                         first->file, first - manifest_.photos.begin()));
-  }
-
-  // The manifest's dark frame and flat field (linear values, as the photos are decoded): the
-  // black level, and the relative illumination gain (flat - dark) / its mean over the central
-  // tenth of the image (width and height / 10), per pixel and channel.
-  void ReadReferenceFrames() {
-    if (manifest_.dark_frame.empty() && manifest_.flat_field.empty()) return;
-    if (!sum_.response.empty())
-      ThrowBadInput("'{}': dark_frame and flat_field need linear photos (--hdr-response linear), not --hdr-response {}",
-                    manifest_path_.string(), o_.hdr.response);
-    auto read = [&](const std::string& file) {
-      Image im = ReadPhoto(dir_ / file, nullptr, input_);
-      if (!manifest_.photos.empty()) {  // the photos must match (checked against the first one's camera)
-        const CameraModel& cam = manifest_.photos[0].camera;
-        if (cam.width > 0 && (im.width != cam.width || im.height != cam.height))
-          ThrowBadInput("'{}' is {}x{} px but the photos' camera is {}x{}: reference frames must come from the same camera",
-                        (dir_ / file).string(), im.width, im.height, cam.width, cam.height);
-      }
-      return im;
-    };
-    if (!manifest_.dark_frame.empty()) dark_ = read(manifest_.dark_frame);
-    if (manifest_.flat_field.empty()) return;
-    Image flat = read(manifest_.flat_field);
-    if (!dark_.pixels.empty()) {
-      CheckSameSize(flat, dark_, manifest_.flat_field, manifest_.dark_frame);
-      for (std::size_t i = 0; i < flat.pixels.size(); ++i) flat.pixels[i] -= dark_.pixels[i];
-    }
-    const int C = flat.channels, x0 = flat.width * 9 / 20, x1 = std::max(x0 + 1, flat.width * 11 / 20),
-              y0 = flat.height * 9 / 20, y1 = std::max(y0 + 1, flat.height * 11 / 20);
-    std::vector<double> center(static_cast<std::size_t>(C), 0.0);
-    for (int y = y0; y < y1; ++y)
-      for (int x = x0; x < x1; ++x)
-        for (int c = 0; c < C; ++c) center[static_cast<std::size_t>(c)] += flat.at(x, y, c);
-    for (int c = 0; c < C; ++c) {
-      const double mean = center[static_cast<std::size_t>(c)] / double((x1 - x0) * (y1 - y0));
-      if (!(mean > 0.01))
-        ThrowBadInput("'{}': channel {} is {:.3g} of full scale at the image center (dark frame subtracted): a flat "
-                      "field must be a photo of a uniformly lit white target filling the frame",
-                      (dir_ / manifest_.flat_field).string(), c, mean);
-      for (int y = 0; y < flat.height; ++y)
-        for (int x = 0; x < flat.width; ++x) {
-          float& g = flat.at(x, y, c);
-          g = static_cast<float>(g / mean);
-          // A flat field is a photo of a uniformly lit white target: nowhere near black.
-          if (!(g >= 0.05f))
-            ThrowBadInput("'{}': pixel ({}, {}) channel {} is {:.3g} of the image center's level (dark frame "
-                          "subtracted): a flat field must be a photo of a uniformly lit white target filling the "
-                          "frame, nowhere below 0.05 of its center",
-                          (dir_ / manifest_.flat_field).string(), x, y, c, g);
-        }
-    }
-    gain_ = std::move(flat);
-  }
-
-  static void CheckSameSize(const Image& a, const Image& b, const std::string& fa, const std::string& fb) {
-    if (a.width != b.width || a.height != b.height || a.channels != b.channels)
-      ThrowBadInput("'{}' is {}x{} px with {} channel(s) but '{}' is {}x{} with {}: the photos and reference frames "
-                    "must have one size",
-                    fa, a.width, a.height, a.channels, fb, b.width, b.height, b.channels);
-  }
-
-  // Dark frame and flat field applied to a linear image (a merged bracket's dark frame is
-  // subtracted per exposure by MergeBracket: subtract_dark false).
-  void Correct(Image& im, const std::string& file, bool subtract_dark) const {
-    if (subtract_dark && !dark_.pixels.empty()) {
-      CheckSameSize(im, dark_, file, manifest_.dark_frame);
-      for (std::size_t i = 0; i < im.pixels.size(); ++i) im.pixels[i] = std::max(0.0f, im.pixels[i] - dark_.pixels[i]);
-    }
-    if (!gain_.pixels.empty()) {
-      CheckSameSize(im, gain_, file, manifest_.flat_field);
-      for (std::size_t i = 0; i < im.pixels.size(); ++i) im.pixels[i] /= gain_.pixels[i];
-    }
-  }
-
-  // The photo's linear image: one photo as read (through the response curve if one was
-  // recovered), or a bracket merged to value / exposure (then `*exposure_out` = 1); the dark
-  // frame subtracted and the flat field divided out.
-  HdrMerge LoadPhoto(const PhotoEntry& e, std::vector<std::string>* warnings, double* exposure_out) const {
-    *exposure_out = e.exposure;
-    HdrMerge m;
-    if (e.brackets.empty()) {
-      const Image stored = ReadPhoto(dir_ / e.file, warnings, input_);
-      // An integer photo's saturated pixels (as a bracket's: stored value >= hdr.saturation of full
-      // scale) have no value: masked like a bracket's pixels clipped in every exposure.
-      if (manifest_.bit_depth > 0) m = ClippedPixels(stored, sum_.response, o_.hdr);
-      m.radiance = stored;
-      if (!sum_.response.empty()) ApplyResponse(m.radiance, sum_.response, e.file);
-      Correct(m.radiance, e.file, true);
-      return m;
-    }
-    std::vector<Image> stored;
-    std::vector<double> exposures;
-    std::vector<std::string> files;
-    for (const auto& b : e.brackets) {
-      stored.push_back(ReadPhoto(dir_ / b.file, warnings, input_));
-      exposures.push_back(b.exposure);
-      files.push_back(b.file);
-    }
-    *exposure_out = 1;
-    for (std::size_t k = 0; k < stored.size() && !dark_.pixels.empty(); ++k)
-      CheckSameSize(stored[k], dark_, files[k], manifest_.dark_frame);
-    m = MergeBracket(stored, exposures, files, sum_.response, o_.hdr, dark_.pixels.empty() ? nullptr : &dark_);
-    Correct(m.radiance, e.file, false);
-    return m;
-  }
-
   // Reads one photo, detects its markers, fits its geometry and checks that the sample is in view.
   PhotoGeometry FitPhoto(const PhotoEntry& e, const TagDetector& det, PhotoReport& r) const {
     double exposure = 0;
-    const HdrMerge merged = LoadPhoto(e, &r.warnings, &exposure);
+    const HdrMerge merged = loader_->Load(e, &r.warnings, &exposure);
     const Image& im = merged.radiance;
     r.exposures = e.brackets.empty() ? 1 : static_cast<int>(e.brackets.size());
     r.hdr_clipped_pixels = merged.clipped_pixels;
@@ -561,36 +572,13 @@ class Registration {
     r.homography = g.image_from_plate;
     r.camera_from_plate_rotation = g.camera_from_plate_rotation;
     r.camera_from_plate_translation = g.camera_from_plate_translation;
-    if (auto t = truth_.find(e.file); t != truth_.end()) CompareWithTruth(t->second, g, r);
-    // The whole sample must be in view: its border projects inside the photo (the map is a
-    // homography plus radial distortion, so the border bounds the region).
-    if (o_.max_invalid_fraction == 0)
-      for (int k = 0; k < 4 * 32; ++k) {
-        const double s = (k % 32 + 0.5) / 32 * S_ - S_ / 2;
-        const Vec2 q = k < 32 ? Vec2(s, -S_ / 2) : k < 64 ? Vec2(S_ / 2, s) : k < 96 ? Vec2(-s, S_ / 2) : Vec2(-S_ / 2, -s);
-        Vec2 px;
-        if (!g.Project(Vec3(q.x(), q.y(), 0), &px) || px.x() < -0.5 || px.y() < -0.5 || px.x() > im.width - 0.5 ||
-            px.y() > im.height - 0.5)
-          ThrowBadInput("the sample region is not fully inside the photo (plate point ({:.1f}, {:.1f}) mm maps to "
-                        "pixel ({:.1f}, {:.1f}))",
-                        q.x(), q.y(), px.x(), px.y());
-      }
+    if (auto t = truth_.find(e.file); t != truth_.end()) CompareWithTruth(t->second, g, S_, r);
+    if (o_.max_invalid_fraction == 0) CheckSampleInView(g, S_, im);
     if (const double occ = OccludedFraction(board_, g); occ > 0)
       r.warnings.push_back(fmt::format("{:.1f}% of the sample is hidden behind raised markers in this view (texels at "
                                        "the edge show the marker)",
                                        100 * occ));
     return g;
-  }
-
-  void CompareWithTruth(const PhotoTruth& truth, const PhotoGeometry& g, PhotoReport& r) const {
-    double ss = 0;
-    int n = 0;
-    for (const auto& d : r.detections)
-      if (auto c = truth.marker_corners_px.find(d.id); c != truth.marker_corners_px.end())
-        for (int k = 0; k < 4; ++k) ss += (d.corners[k] - c->second[k]).squaredNorm(), ++n;
-    if (n) r.truth_corner_rms_px = std::sqrt(ss / n);
-    std::tie(r.truth_homography_rms_px, r.truth_homography_max_px) =
-        HomographyError(g.image_from_plate, truth.image_from_plate, S_);
   }
 
   // Rectifies and normalizes every registered photo of view v (in parallel); returns the images
@@ -604,23 +592,22 @@ class Registration {
     const int n_ok = static_cast<int>(photo_of_.size());
 #pragma omp parallel for schedule(dynamic, 1)
     for (std::size_t k = 0; k < photos.size(); ++k) {
-      if (cancelled_) continue;
+      if (loop_.cancelled()) continue;
       const int i = photos[k];
       PhotoReport& r = sum_.reports[i];
       try {
         tex[k] = RectifyPhoto(manifest_.photos[i], geoms_[i], r, &mask[k]);
       } catch (const Cancelled&) {
-        cancelled_ = true;
+        loop_.Cancel();
       } catch (const std::exception& ex) {
         r.ok = false;
         r.error = ex.what();
         tex[k] = Image();
-        if (const auto* e = dynamic_cast<const Error*>(&ex); e && e->code() == ExitCode::kIo) KeepIoError();
+        if (const auto* e = dynamic_cast<const Error*>(&ex); e && e->code() == ExitCode::kIo) loop_.KeepIoError();
       }
-      Progress("rectify", n_ok);
+      loop_.Progress("rectify", n_ok);
     }
-    RethrowIoError();
-    if (cancelled_) throw Cancelled();
+    loop_.Finish();
     std::map<int, const Image*> by_light;
     for (std::size_t k = 0; k < photos.size(); ++k)
       if (sum_.reports[photos[k]].ok) {
@@ -647,7 +634,7 @@ class Registration {
   // or touching a pixel clipped in every exposure of a bracket (counted in the report).
   Image RectifyPhoto(const PhotoEntry& entry, const PhotoGeometry& g, PhotoReport& r, std::vector<std::uint8_t>* mask) const {
     PhotoEntry e = entry;
-    const HdrMerge merged = LoadPhoto(entry, nullptr, &e.exposure);
+    const HdrMerge merged = loader_->Load(entry, nullptr, &e.exposure);
     const PlateToPixel project = [&g](const Vec2& p, Vec2* px) { return g.Project(Vec3(p.x(), p.y(), 0), px); };
     RectifyStats st;
     Image tex = Rectify(merged.radiance, project, S_, o_.rectify, &st);
@@ -660,17 +647,7 @@ class Registration {
       for (std::size_t i = 0; i < mask->size(); ++i)
         if (clipped.pixels[i] > 0) r.masked_clipped += 1, (*mask)[i] = 1;
     }
-    if (std::count(mask->begin(), mask->end(), 0) == 0) {
-      std::string files;
-      for (const auto& b : entry.brackets) files += (files.empty() ? "'" : ", '") + b.file + "'";
-      const std::string limit = fmt::format("stored value >= {} of full scale{}", o_.hdr.saturation,
-                                            sum_.response.empty() ? "" : fmt::format(" or code > {}, the response curve's last constrained code", sum_.response.max_code));
-      ThrowBadInput("every texel of the sample is masked ({} hidden behind raised markers, {} clipped{}{}{}): {}",
-                    r.masked_hidden, r.masked_clipped, files.empty() ? " (" : " in every exposure of the bracket (",
-                    files.empty() ? limit : files + "; " + limit, ")",
-                    r.masked_clipped == 0 ? "use a view where the sample is visible"
-                                          : (files.empty() ? "lower the exposure or add a bracket" : "add a shorter exposure"));
-    }
+    if (std::count(mask->begin(), mask->end(), 0) == 0) ThrowAllMasked(entry, r, o_.hdr, sum_.response);
     r.invalid_fraction = st.invalid_fraction;
     r.max_footprint_px = st.max_footprint_px;
     if (st.invalid_fraction > o_.max_invalid_fraction)
@@ -687,10 +664,8 @@ class Registration {
     return tex;
   }
 
-  // With tile_method "reconstruct": each registered photo of view v reconstructs the unit tile from
-  // its pixels (ReconstructTile), in the units of RectifyPhoto's normtexture (the radiometric
-  // factor evaluated at each pixel's plate point), with the masks of RectifyPhoto per pixel:
-  // hidden behind a raised marker, clipped. Photos in parallel, each solved serially.
+  // With tile_method "reconstruct": the unit tile of each registered photo of view v
+  // (ReconstructPhotoTile). Photos in parallel, each solved serially.
   std::map<int, Image> ReconstructView(int v, const std::map<int, const Image*>& by_light) {
     std::vector<int> lights;
     for (const auto& [l, im] : by_light) lights.push_back(l);
@@ -703,25 +678,13 @@ class Registration {
       PhotoReport& r = sum_.reports[i];
       try {
         PhotoEntry e = manifest_.photos[i];
-        const HdrMerge merged = LoadPhoto(manifest_.photos[i], nullptr, &e.exposure);
-        const PhotoGeometry& g = geoms_[i];
-        std::vector<std::uint8_t> clipped;
-        if (merged.clipped_pixels > 0)
-          for (float c : merged.clipped.pixels) clipped.push_back(c > 0);
-        TilePhoto tp;
-        tp.photo = &merged.radiance;
-        tp.project = [&g](const Vec2& p, Vec2* px) { return g.Project(Vec3(p.x(), p.y(), 0), px); };
-        tp.sample_size_mm = S_;
-        tp.resolution = o_.rectify.resolution;
-        tp.scale = [&](const Vec2& p) { return 1.0 / (e.exposure * (o_.radiometry ? IrradianceAt(e, p) : 1.0)); };
-        if (g.has_pose)
-          tp.hidden = [&, cam = CameraCenter(g)](const Vec2& p) { return HiddenByMarker(board_, cam, Vec3(p.x(), p.y(), 0)); };
-        tp.pixel_mask = clipped.empty() ? nullptr : &clipped;
-        ReconstructedTile rt = ReconstructTile(tp, *sum_.lattice, o_.reconstruct);
+        const HdrMerge merged = loader_->Load(manifest_.photos[i], nullptr, &e.exposure);
+        ReconstructedTile rt = ReconstructPhotoTile(merged, e, geoms_[i], board_, S_, o_, *sum_.lattice);
+        const int resolution = o_.rectify.resolution;
         r.tile_pixels_used = rt.pixels_used;
         r.tile_pixels_masked = rt.pixels_masked;
         r.tile_residual_rms = rt.residual_rms;
-        out[k] = o_.tile_output == "tile" ? std::move(rt.tile.tile) : TileImage(rt.tile, *sum_.lattice, tp.resolution, tp.resolution);
+        out[k] = o_.tile_output == "tile" ? std::move(rt.tile.tile) : TileImage(rt.tile, *sum_.lattice, resolution, resolution);
       } catch (const Error& ex) {
         std::lock_guard<std::mutex> lock(error_mutex);
         if (!error) error = std::make_exception_ptr(Error(ex.code(), fmt::format("'{}': {}", r.file, ex.what())));
@@ -751,7 +714,7 @@ class Registration {
         const int i = photo_of_.at({v, l});
         double exposure = 0;
         const PhotoGeometry& g = geoms_[i];
-        finer.push_back(Rectify(LoadPhoto(manifest_.photos[i], nullptr, &exposure).radiance,
+        finer.push_back(Rectify(loader_->Load(manifest_.photos[i], nullptr, &exposure).radiance,
                                 [&g](const Vec2& p, Vec2* px) { return g.Project(Vec3(p.x(), p.y(), 0), px); }, S_, ro));
         images[l] = &finer.back();
       }
@@ -769,18 +732,7 @@ class Registration {
   // that no single bright light dominates).
   void EstimateLatticeOn(int v, const std::map<int, const Image*>& by_light) {
     const int n = by_light.begin()->second->width;
-    std::vector<float> gray(static_cast<std::size_t>(n) * n, 0.0f);
-    for (const auto& [l, im] : by_light) {
-      double mean = 0;
-      for (float x : im->pixels) mean += x;
-      mean = mean > 0 ? mean / static_cast<double>(im->pixels.size()) : 1;
-      for (std::size_t p = 0; p < gray.size(); ++p) {
-        double g = 0;
-        for (int c = 0; c < channels_; ++c) g += im->pixels[p * channels_ + c];
-        gray[p] += static_cast<float>(g / (channels_ * mean));
-      }
-    }
-    sum_.lattice = EstimateLattice(gray, n, n, o_.lattice);
+    sum_.lattice = EstimateLattice(NormalizedGray(by_light, channels_), n, n, o_.lattice);
     rep_.Info("lattice on view {} ({} x {} texels): a1 = ({:.3f}, {:.3f}), a2 = ({:.3f}, {:.3f}) texels, {} yarn cell(s) per repeat", v, n, n,
               sum_.lattice->a1.x(), sum_.lattice->a1.y(), sum_.lattice->a2.x(), sum_.lattice->a2.y(),
               sum_.lattice->yarn_cells_per_repeat);
@@ -792,26 +744,8 @@ class Registration {
     sum_.channels = channels_;
     sum_.views = views_.size();
     sum_.lights = lights_.size();
-    DatasetInfo info;
-    info.units = o_.radiometry ? "brdf_per_sr" : "relative";
-    info.cos_theta_i_included = false;
-    info.channel_names = channels_ == 3 ? std::vector<std::string>{"R", "G", "B"}
-                                        : channels_ == 1 ? std::vector<std::string>{"Y"} : std::vector<std::string>{};
-    if (info.channel_names.empty())
-      for (int c = 0; c < channels_; ++c) info.channel_names.push_back(fmt::format("C{}", c));
-    info.texel_size_mm = S_ / o_.rectify.resolution;
-    if (o_.tile_average && o_.tile_output == "tile")
-      info.texel_size_mm *= std::max(sum_.lattice->a1.norm(), sum_.lattice->a2.norm()) / first.width;
-    info.provenance = {{"creator", "btf-register"},
-                       {"manifest", manifest_path_.string()},
-                       {"board", (dir_ / manifest_.board_file).string()},
-                       {"sample_size_mm", S_},
-                       {"resolution", o_.rectify.resolution},
-                       {"radiometry", o_.radiometry},
-                       {"tile_average", o_.tile_average},
-                       {"tile_output", o_.tile_output}};
-    if (sum_.lattice) info.provenance["lattice"] = sum_.lattice->ToJson();
-    if (o_.tile_average) info.provenance["tile_method"] = o_.tile_method;
+    const DatasetInfo info = RegisteredDatasetInfo(o_, sum_.lattice, channels_, first.width, S_, manifest_path_.string(),
+                                                   (dir_ / manifest_.board_file).string());
     DatasetWriteOptions wo = o_.write;
     if (wo.creator == "libbtf") wo.creator = "btf-register";
     writer_ = std::make_unique<DatasetWriter>(output, views_, lights_, first.height, first.width, channels_, info, wo);
@@ -845,30 +779,6 @@ class Registration {
     if (o_.contact_sheet_thumb > 0 && brightest) thumbs_[vi] = Thumbnail(*brightest, o_.contact_sheet_thumb);
   }
 
-  // A photo that cannot be read (a failing disk, not a bad photo) ends the run with an I/O error
-  // (exit 4) instead of being left out: called in a catch block of a parallel loop; the loop's
-  // remaining iterations are skipped and RethrowIoError() after it throws the first one.
-  void KeepIoError() {
-    std::lock_guard<std::mutex> lock(progress_mutex_);
-    if (!io_error_) io_error_ = std::current_exception();
-    cancelled_ = true;
-  }
-  void RethrowIoError() {
-    if (io_error_) std::rethrow_exception(io_error_);
-  }
-
-  // Thread-safe progress from parallel loops; a cancellation stops the remaining iterations.
-  void Progress(const char* stage, int total) {
-    const int d = ++done_;
-    std::lock_guard<std::mutex> lock(progress_mutex_);
-    if (cancelled_) return;
-    try {
-      rep_.Progress(static_cast<std::size_t>(d), static_cast<std::size_t>(total), stage);
-    } catch (const Cancelled&) {
-      cancelled_ = true;
-    }
-  }
-
   const RegisterOptions& o_;
   const std::filesystem::path manifest_path_, dir_;
   const Reporter& rep_;
@@ -877,8 +787,7 @@ class Registration {
   Board board_;
   std::map<std::string, PhotoTruth> truth_;
   TagDetectorOptions detector_;
-  ImageReadOptions input_;
-  Image dark_, gain_;  // the manifest's dark frame and flat-field gain (empty = none)
+  std::unique_ptr<PhotoLoader> loader_;  // the photos as linear images (after ReadInputs)
   double S_ = 0;  // sample side, mm
   std::vector<PhotoGeometry> geoms_;
   std::vector<int> view_list_, light_list_;
@@ -888,10 +797,7 @@ class Registration {
   int channels_ = 0;
   std::unique_ptr<DatasetWriter> writer_;
   std::vector<Image> thumbs_;
-  std::atomic<bool> cancelled_{false};
-  std::exception_ptr io_error_;
-  std::atomic<int> done_{0};
-  std::mutex progress_mutex_;
+  ParallelLoop loop_;
 };
 
 }  // namespace

@@ -1,6 +1,6 @@
 #pragma once
 // Unit-tile reconstruction from all photo pixels (multi-frame super-resolution on a periodic
-// weave; issue #13, docs/btf-register.md "Unit-tile reconstruction").
+// weave; docs/btf-register.md "Unit-tile reconstruction").
 //
 // The unit tile of the lattice (lattice.h) is a periodic T x T grid of unknowns in lattice
 // coordinates with a bilinear basis. Every photo pixel whose footprint lies on the sample and is

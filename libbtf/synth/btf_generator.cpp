@@ -112,6 +112,9 @@ void GenerateViewSlot(const SvbrdfModel& model, const BtfOptions& options, int v
   FillViewSlot(model, options, SamplePositions(options), view, out);
 }
 
+namespace {
+
+// DatasetInfo for a generated BTF: units, texel size and provenance (model, sampling, supersampling).
 DatasetInfo GeneratedBtfInfo(const SvbrdfModel& model, const BtfOptions& o) {
   DatasetInfo info;
   info.units = "brdf_per_sr";
@@ -137,8 +140,6 @@ DatasetInfo GeneratedBtfInfo(const SvbrdfModel& model, const BtfOptions& o) {
                      {"texture_coordinates", "u = tiles (x + 0.5) / N, v = tiles (1 - (y + 0.5) / N) at texel centres"}};
   return info;
 }
-
-namespace {
 
 BtfSummary MakeSummary(const BtfOptions& o, const PhaseTimes& times) {
   const int N = o.resolution;

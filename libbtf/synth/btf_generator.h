@@ -75,9 +75,6 @@ BtfSummary GenerateBtf(const BtfOptions& options, const SvbrdfModel& model, Data
 BtfSummary WriteGeneratedBtf(const BtfOptions& options, const SvbrdfModel& model, const std::filesystem::path& path,
                              const Reporter& reporter = {}, const nlohmann::json& extra_provenance = {});
 
-// DatasetInfo for a generated BTF: units, texel size and provenance (model, sampling, supersampling).
-DatasetInfo GeneratedBtfInfo(const SvbrdfModel& model, const BtfOptions& options);
-
 // The far-field BRDF (SvbrdfModel::EvalBrdf) on views x lights, as a 1 x 1 texel dataset.
 Dataset GenerateBrdf(const SvbrdfModel& model, const Sampling& views, const Sampling& lights);
 

@@ -10,6 +10,7 @@
 //    samples), so values agree with Mitsuba's only up to Mitsuba's own Monte Carlo noise.
 //  - randomness (umax noise, intensity variation) is off by default ("noise": false); when on it
 //    uses our own hash and gradient noise, not Mitsuba's random sequence.
+#include <algorithm>
 #include <memory>
 #include <string>
 #include <vector>
@@ -30,9 +31,15 @@ namespace irawan2012 {
 double SpineRadius(double u, double umax, double kappa, double w, double l);
 
 // von Mises density on the circle, vM(c; b) = e^{b c} / (2 pi I0(|b|)), evaluated in scaled form
-// (no overflow for large |b|). VonMisesNorm(b) = 1 / (2 pi e^{-|b|} I0(|b|)) is the cached part.
-double VonMisesNorm(double b);
+// (no overflow for large |b|).
 double VonMises(double cos_x, double b);
+
+// The smooth cutoff 3x^2 - 2x^3 of x clamped to [0, 1]: the highlight's fade towards umax, as the
+// model evaluates it and N_spec's quadrature integrates it.
+inline double SmoothStep01(double x) {
+  x = std::clamp(x, 0.0, 1.0);
+  return x * x * (3 - 2 * x);
+}
 
 // Seeliger attenuation (1/4pi) c1 c2 / (c1 + c2) with c = max(0, cos); 0 if either is 0.
 double Seeliger(double cos1, double cos2);

@@ -227,10 +227,15 @@ void PhotoOptions::Check() const {
                    "response-gamma", "8-bit format (png8 or jpeg) with transfer linear (the response replaces it)");
 }
 
+namespace {
+
+// The camera response of `options` (response_gamma > 0): linear value in [0, 1] -> stored value in [0, 1].
 double CameraResponse(const PhotoOptions& o, double x) {
   const double y = std::pow(std::clamp(x, 0.0, 1.0), 1.0 / o.response_gamma);
   return y / ((1.0 / o.response_bias - 2.0) * (1.0 - y) + 1.0);
 }
+
+}  // namespace
 
 nlohmann::json PhotoSummary::ToJson() const {
   return {{"photos", photos},
@@ -335,6 +340,96 @@ CameraPose MakeCamera(const PhotoOptions& o, const Board& board, const Vec3& vie
   return c;
 }
 
+namespace {
+
+// The photo's light: a point light light_distance_mm along light_dir with its intensity, or (at
+// distance <= 0) a directional light.
+struct PhotoLight {
+  Vec3 dir, pos;
+  double intensity = 1, distance = 0;
+
+  PhotoLight(const PhotoOptions& o, const Vec3& light_dir)
+      : dir(light_dir),
+        pos(o.light_distance_mm * light_dir),
+        intensity(o.light_intensity > 0 ? o.light_intensity
+                                        : (o.light_distance_mm > 0 ? o.light_distance_mm * o.light_distance_mm : 1.0)),
+        distance(o.light_distance_mm) {}
+
+  // Irradiance at plate point X.
+  double At(const Vec3& X) const {
+    if (distance <= 0) return intensity * std::max(0.0, dir.z());
+    const Vec3 r = pos - X;
+    const double r2 = r.squaredNorm();
+    return intensity * std::max(0.0, r.z() / std::sqrt(r2)) / r2;
+  }
+  // The direction to the light from X.
+  Vec3 From(const Vec3& X) const { return distance > 0 ? Vec3((pos - X).normalized()) : dir; }
+};
+
+// ChArUco: the marker in each square (-1: a black square); white squares hold a marker. Empty
+// without a ChArUco board.
+std::vector<int> CharucoSquareMarkers(const Board& board) {
+  std::vector<int> square_marker;
+  if (!board.charuco.valid()) return square_marker;
+  square_marker.assign(static_cast<std::size_t>(board.charuco.squares_x * board.charuco.squares_y), -1);
+  for (std::size_t i = 0; i < board.markers.size(); ++i) {
+    const auto& c = board.markers[i].corners_mm;
+    const int sq = CharucoSquare(board.charuco, 0.25 * (c[0] + c[1] + c[2] + c[3]));
+    if (sq >= 0) square_marker[static_cast<std::size_t>(sq)] = static_cast<int>(i);
+  }
+  return square_marker;
+}
+
+// The board's part of a ray from the camera center along dir (dir.z() < 0): if the ray ends on
+// a chessboard square, an AprilGrid corner square or a marker card, adds its radiance to a[0..2]
+// and returns true; false if it reaches the material or the plate.
+bool AddBoardRadiance(const Board& board, const std::vector<MarkerGeom>& markers, const std::vector<int>& square_marker,
+                      const CameraPose& cam, const Vec3& dir, const PhotoLight& light, double* a) {
+  const MarkerGeom* only = nullptr;  // AprilGrid: the one tag whose cell holds the point
+  if (board.charuco.valid()) {  // chessboard squares and markers, all in the plane z = 0
+    const double t = -cam.center.z() / dir.z();
+    const Vec3 X = cam.center + t * dir;
+    const int sq = CharucoSquare(board.charuco, X.head<2>());
+    if (sq >= 0) {
+      const int mi = square_marker[static_cast<std::size_t>(sq)];
+      double alb = mi < 0 ? kBlack : MarkerAlbedo(markers[static_cast<std::size_t>(mi)], X.head<2>());
+      if (alb < 0) alb = kWhite;  // the white square around the marker
+      const double L = alb / kPi * light.At(X);
+      a[0] += L, a[1] += L, a[2] += L;
+      return true;
+    }
+  }
+  if (board.grid.valid()) {  // corner squares and tags, all in the plane z = 0
+    const double t = -cam.center.z() / dir.z();
+    const Vec3 X = cam.center + t * dir;
+    if (InGridCornerSquare(board.grid, X.head<2>())) {
+      const double L = kBlack / kPi * light.At(X);
+      a[0] += L, a[1] += L, a[2] += L;
+      return true;
+    }
+    const AprilGrid& gr = board.grid;
+    const double s = gr.tag_size_mm, gap = gr.spacing * s, pitch = s + gap;
+    const double c = std::floor((X.x() + (gr.cols * pitch - gap) / 2 + gap / 2) / pitch);
+    const double r = std::floor((X.y() + (gr.rows * pitch - gap) / 2 + gap / 2) / pitch);
+    if (c >= 0 && r >= 0 && c < gr.cols && r < gr.rows)
+      only = &markers[static_cast<std::size_t>(r * gr.cols + c)];
+  }
+  // Marker cards (they lie at or above the material surface).
+  for (const MarkerGeom& g : markers) {
+    if (board.grid.valid() && &g != only) continue;
+    const double t = (g.height - cam.center.z()) / dir.z();
+    const Vec3 X = cam.center + t * dir;
+    const double alb = MarkerAlbedo(g, X.head<2>());
+    if (alb < 0) continue;
+    const double L = alb / kPi * light.At(X);
+    a[0] += L, a[1] += L, a[2] += L;
+    return true;
+  }
+  return false;
+}
+
+}  // namespace
+
 Image RenderPhoto(const SvbrdfModel& model, const Board& board, const PhotoOptions& o, const CameraPose& cam,
                   const Vec3& view_dir_in, const Vec3& light_dir_in) {
   if (model.channels() != 3) ThrowUsage("photo synthesis needs an RGB model, '{}' has {} channels", model.name(),
@@ -344,32 +439,12 @@ Image RenderPhoto(const SvbrdfModel& model, const Board& board, const PhotoOptio
   const double half_sample = board.sample_size_mm / 2, plate_half = PlateHalfSize(board);
   const double tile = model.tile_size_mm();
   const PatternWarp warp(o.irregularity, o.irregularity_seed);
-  const double intensity =
-      o.light_intensity > 0 ? o.light_intensity : (o.light_distance_mm > 0 ? o.light_distance_mm * o.light_distance_mm : 1.0);
-  const Vec3 light_pos = o.light_distance_mm * light_dir;
-  auto irradiance = [&](const Vec3& X) {
-    if (o.light_distance_mm <= 0) return intensity * std::max(0.0, light_dir.z());
-    const Vec3 r = light_pos - X;
-    const double r2 = r.squaredNorm();
-    return intensity * std::max(0.0, r.z() / std::sqrt(r2)) / r2;
-  };
-  auto light_from = [&](const Vec3& X) -> Vec3 {
-    return o.light_distance_mm > 0 ? Vec3((light_pos - X).normalized()) : light_dir;
-  };
+  const PhotoLight light(o, light_dir);
   const int W = o.width, H = o.height, n = o.pixel_samples;
   const auto& K = cam.camera;
   const Eigen::Matrix3d Rt = cam.camera_from_plate_rotation.transpose();
   Image img(W, H, 3);
-  // ChArUco: the marker in each square (-1: a black square); white squares hold a marker.
-  std::vector<int> square_marker;
-  if (board.charuco.valid()) {
-    square_marker.assign(static_cast<std::size_t>(board.charuco.squares_x * board.charuco.squares_y), -1);
-    for (std::size_t i = 0; i < board.markers.size(); ++i) {
-      const auto& c = board.markers[i].corners_mm;
-      const int sq = CharucoSquare(board.charuco, 0.25 * (c[0] + c[1] + c[2] + c[3]));
-      if (sq >= 0) square_marker[static_cast<std::size_t>(sq)] = static_cast<int>(i);
-    }
-  }
+  const std::vector<int> square_marker = CharucoSquareMarkers(board);
 #pragma omp parallel
   {
     std::vector<Vec2> uvs;
@@ -393,57 +468,15 @@ Image RenderPhoto(const SvbrdfModel& model, const Board& board, const PhotoOptio
             const Vec3 dir = Rt * Vec3(u.x(), u.y(), 1);
             if (dir.z() >= 0) continue;  // ray misses the plate: black
             double* a = &acc[static_cast<std::size_t>(px) * 3];
-            // Marker cards first (they lie at or above the material surface).
-            bool hit = false;
-            const MarkerGeom* only = nullptr;  // AprilGrid: the one tag whose cell holds the point
-            if (board.charuco.valid()) {  // chessboard squares and markers, all in the plane z = 0
-              const double t = -cam.center.z() / dir.z();
-              const Vec3 X = cam.center + t * dir;
-              const int sq = CharucoSquare(board.charuco, X.head<2>());
-              if (sq >= 0) {
-                const int mi = square_marker[static_cast<std::size_t>(sq)];
-                double alb = mi < 0 ? kBlack : MarkerAlbedo(markers[static_cast<std::size_t>(mi)], X.head<2>());
-                if (alb < 0) alb = kWhite;  // the white square around the marker
-                const double L = alb / kPi * irradiance(X);
-                a[0] += L, a[1] += L, a[2] += L;
-                continue;
-              }
-            }
-            if (board.grid.valid()) {  // corner squares and tags, all in the plane z = 0
-              const double t = -cam.center.z() / dir.z();
-              const Vec3 X = cam.center + t * dir;
-              if (InGridCornerSquare(board.grid, X.head<2>())) {
-                const double L = kBlack / kPi * irradiance(X);
-                a[0] += L, a[1] += L, a[2] += L;
-                continue;
-              }
-              const AprilGrid& gr = board.grid;
-              const double s = gr.tag_size_mm, gap = gr.spacing * s, pitch = s + gap;
-              const double c = std::floor((X.x() + (gr.cols * pitch - gap) / 2 + gap / 2) / pitch);
-              const double r = std::floor((X.y() + (gr.rows * pitch - gap) / 2 + gap / 2) / pitch);
-              if (c >= 0 && r >= 0 && c < gr.cols && r < gr.rows)
-                only = &markers[static_cast<std::size_t>(r * gr.cols + c)];
-            }
-            for (const MarkerGeom& g : markers) {
-              if (board.grid.valid() && &g != only) continue;
-              const double t = (g.height - cam.center.z()) / dir.z();
-              const Vec3 X = cam.center + t * dir;
-              const double alb = MarkerAlbedo(g, X.head<2>());
-              if (alb < 0) continue;
-              const double L = alb / kPi * irradiance(X);
-              a[0] += L, a[1] += L, a[2] += L;
-              hit = true;
-              break;
-            }
-            if (hit) continue;
+            if (AddBoardRadiance(board, markers, square_marker, cam, dir, light, a)) continue;
             const double t0 = -cam.center.z() / dir.z();
             const Vec3 X = cam.center + t0 * dir;
-            const double E = irradiance(X);
+            const double E = light.At(X);
             if (half_sample > 0 && std::abs(X.x()) <= half_sample && std::abs(X.y()) <= half_sample) {
               const Vec2 uv = warp.Apply(Vec2((X.x() + half_sample) / tile, (X.y() + half_sample) / tile));
               if (o.true_directions) {
                 float f[3];
-                model.Eval(uv, light_from(X), (cam.center - X).normalized(), f);
+                model.Eval(uv, light.From(X), (cam.center - X).normalized(), f);
                 a[0] += f[0] * E, a[1] += f[1] * E, a[2] += f[2] * E;
               } else {
                 uvs.push_back(uv);
@@ -488,16 +521,12 @@ std::vector<std::pair<int, int>> SelectPhotos(const PhotoOptions& o) {
   return out;
 }
 
-PhotoSummary SynthesizePhotos(const PhotoOptions& o, const SvbrdfModel& model, const std::filesystem::path& out_dir,
-                              const Reporter& reporter, const nlohmann::json& extra) {
-  o.Check();
-  AtomicDirectory output(out_dir, "manifest.json");
-  const std::filesystem::path& dir = output.temp_path();
-  const Board board = MakeBoard(o, model.tile_size_mm());
-  const auto pairs = SelectPhotos(o);
-  for (const auto& [v, l] : pairs) MakeCamera(o, board, o.views[v]);  // fail fast on impossible views
-  const double intensity =
-      o.light_intensity > 0 ? o.light_intensity : (o.light_distance_mm > 0 ? o.light_distance_mm * o.light_distance_mm : 1.0);
+namespace {
+
+// The manifest of a photo set before its photos: the samplings, the encoding and in `extra` how
+// the photos were made (keys of the newer options only when they are used, so that the default
+// manifest stays as it was).
+Manifest PhotoManifest(const PhotoOptions& o, const SvbrdfModel& model, const nlohmann::json& extra) {
   Manifest manifest;
   manifest.board_file = "board.json";
   manifest.views = o.views;
@@ -514,7 +543,6 @@ PhotoSummary SynthesizePhotos(const PhotoOptions& o, const SvbrdfModel& model, c
   manifest.extra["pixel_samples_per_axis"] = o.pixel_samples;
   manifest.extra["directions"] = o.true_directions ? "per point (true)" : "nominal per photo";
   manifest.extra["noise_sd"] = o.noise;
-  // Keys of the newer options only when they are used (the default manifest stays as it was).
   if (o.blur_px > 0) manifest.extra["blur_sigma_px"] = o.blur_px;
   if (o.psf == "disc") manifest.extra["psf"] = {{"kind", "disc"}, {"radius_px", o.disc_radius_px}};
   if (o.format == "jpeg") manifest.extra["jpeg_quality"] = o.jpeg_quality;
@@ -535,42 +563,123 @@ PhotoSummary SynthesizePhotos(const PhotoOptions& o, const SvbrdfModel& model, c
                                   {"bias", o.response_bias},
                                   {"code_to_linear", inverse}};
   }
-  std::vector<PhotoTruth> truth;
-  PhotoSummary summary;
-  PhaseTimes times;
+  return manifest;
+}
+
+ImageWriteOptions PhotoWriteOptions(const PhotoOptions& o) {
   ImageWriteOptions wopt;
   wopt.has_format = true;
   wopt.format = o.format == "exr" ? PixelFormat::kFloat
                 : (o.format == "png8" || o.format == "jpeg" ? PixelFormat::kUint8 : PixelFormat::kUint16);
   wopt.srgb = o.transfer == "srgb";
   wopt.jpeg_quality = o.jpeg_quality;
-  const std::string ext = o.format == "exr" ? ".exr" : (o.format == "jpeg" ? ".jpg" : ".png");
-  // Relative illumination and the black level per pixel (channels alike).
+  return wopt;
+}
+
+// The sensor's relative illumination (vignetting) and black level per pixel (channels alike).
+struct SensorPattern {
+  std::vector<double> gain, dark;
+};
+
+SensorPattern MakeSensorPattern(const PhotoOptions& o) {
   const std::size_t np = static_cast<std::size_t>(o.width) * o.height;
-  std::vector<double> gain(np, 1.0), dark(np, 0.0);
+  SensorPattern sp{std::vector<double>(np, 1.0), std::vector<double>(np, 0.0)};
   const double cx = 0.5 * o.width, cy = 0.5 * o.height, r2_corner = cx * cx + cy * cy;
   for (std::size_t p = 0; p < np; ++p) {
     const double dx = double(p % std::size_t(o.width)) + 0.5 - cx, dy = double(p / std::size_t(o.width)) + 0.5 - cy;
-    gain[p] = 1 - o.vignetting * (dx * dx + dy * dy) / r2_corner;
-    if (o.dark_level > 0) dark[p] = o.dark_level * (0.5 + HashUniform(o.seed, 0x5eed0da4c, p));
+    sp.gain[p] = 1 - o.vignetting * (dx * dx + dy * dy) / r2_corner;
+    if (o.dark_level > 0) sp.dark[p] = o.dark_level * (0.5 + HashUniform(o.seed, 0x5eed0da4c, p));
   }
-  if (o.vignetting > 0 || o.dark_level > 0) {
-    // Reference photos, in the photos' format: the dark frame, and the flat field (a white target
-    // at 0.8 of full scale at the image center), each with the photos' black level.
-    const int C = 3;
-    Image dark_img(o.width, o.height, C), flat_img(o.width, o.height, C);
-    for (std::size_t i = 0; i < dark_img.pixels.size(); ++i) {
-      dark_img.pixels[i] = static_cast<float>(dark[i / C]);
-      flat_img.pixels[i] = static_cast<float>(std::min(1.0, 0.8 * gain[i / C] + dark[i / C]));
+  return sp;
+}
+
+// Reference photos, in the photos' format: the dark frame, and the flat field (a white target at
+// 0.8 of full scale at the image center), each with the photos' black level; named in the manifest.
+void WriteReferenceFrames(const PhotoOptions& o, const SensorPattern& sp, const std::filesystem::path& dir,
+                          const std::string& ext, const ImageWriteOptions& wopt, Manifest* manifest) {
+  const int C = 3;
+  Image dark_img(o.width, o.height, C), flat_img(o.width, o.height, C);
+  for (std::size_t i = 0; i < dark_img.pixels.size(); ++i) {
+    dark_img.pixels[i] = static_cast<float>(sp.dark[i / C]);
+    flat_img.pixels[i] = static_cast<float>(std::min(1.0, 0.8 * sp.gain[i / C] + sp.dark[i / C]));
+  }
+  manifest->dark_frame = "dark" + ext;
+  manifest->flat_field = "flat" + ext;
+  WriteImage(dir / manifest->dark_frame, dark_img, wopt);
+  WriteImage(dir / manifest->flat_field, flat_img, wopt);
+  manifest->extra["vignetting"] = {{"relative_illumination", "1 - v (r / r_corner)^2, r from the image center"},
+                                   {"v", o.vignetting}};
+  manifest->extra["dark_level"] = {{"dark", "level (0.5 + u), u uniform per pixel (fixed pattern)"}, {"level", o.dark_level}};
+}
+
+// What the camera stores for the rendered radiance img at exposure eb: through the sensor
+// pattern, with noise (from hash stream `stream`), clipped at the white level for a bracket, and
+// through the camera response.
+Image ExposeShot(const Image& img, double eb, const SensorPattern& sp, const PhotoOptions& o, std::uint64_t stream) {
+  Image shot = img;
+  for (std::size_t i = 0; i < shot.pixels.size(); ++i) {
+    double x = eb * sp.gain[i / std::size_t(img.channels)] * img.pixels[i] + sp.dark[i / std::size_t(img.channels)];
+    if (o.noise > 0) {  // Box-Muller on a hash: the same noise whatever the thread count
+      const double u1 = std::max(HashUniform(o.seed, stream + 1, i), 1e-300), u2 = HashUniform(o.seed, stream + 2, i);
+      x += o.noise * std::sqrt(-2 * std::log(u1)) * std::cos(2 * kPi * u2);
     }
-    manifest.dark_frame = "dark" + ext;
-    manifest.flat_field = "flat" + ext;
-    WriteImage(dir / manifest.dark_frame, dark_img, wopt);
-    WriteImage(dir / manifest.flat_field, flat_img, wopt);
-    manifest.extra["vignetting"] = {{"relative_illumination", "1 - v (r / r_corner)^2, r from the image center"},
-                                    {"v", o.vignetting}};
-    manifest.extra["dark_level"] = {{"dark", "level (0.5 + u), u uniform per pixel (fixed pattern)"}, {"level", o.dark_level}};
+    x = std::max(0.0, x);
+    if (!o.brackets.empty()) x = std::min(1.0, x);  // the white level (integer writing clips there anyway)
+    if (o.response_gamma > 0) x = CameraResponse(o, x);
+    shot.pixels[i] = static_cast<float>(x);
   }
+  return shot;
+}
+
+// The ground truth of one photo: the camera pose, its plate homography and the pixels of the
+// marker corners (and ChArUco corners) at least one pixel inside the image.
+PhotoTruth TruthOf(const CameraPose& cam, const Board& board, const PhotoOptions& o, const std::string& file) {
+  PhotoTruth tr;
+  tr.file = file;
+  tr.image_from_plate = cam.PlateHomography();
+  tr.camera_from_plate_rotation = cam.camera_from_plate_rotation;
+  tr.camera_from_plate_translation = cam.camera_from_plate_translation;
+  for (const Marker& m : board.markers) {
+    std::array<Vec2, 4> px;
+    bool visible = true;
+    for (int q = 0; q < 4; ++q) {
+      visible = visible && cam.Project(Vec3(m.corners_mm[q].x(), m.corners_mm[q].y(), m.height_mm), &px[q]);
+      visible = visible && px[q].x() >= 1 && px[q].y() >= 1 && px[q].x() <= o.width - 2 && px[q].y() <= o.height - 2;
+    }
+    if (visible) tr.marker_corners_px[m.id] = px;
+  }
+  if (board.charuco.valid()) {
+    const std::vector<Vec2> corners = CharucoCornersMm(board.charuco);
+    for (std::size_t id = 0; id < corners.size(); ++id) {
+      Vec2 px;
+      if (cam.Project(Vec3(corners[id].x(), corners[id].y(), 0), &px) && px.x() >= 1 && px.y() >= 1 &&
+          px.x() <= o.width - 2 && px.y() <= o.height - 2)
+        tr.charuco_corners_px[static_cast<int>(id)] = px;
+    }
+  }
+  return tr;
+}
+
+}  // namespace
+
+PhotoSummary SynthesizePhotos(const PhotoOptions& o, const SvbrdfModel& model, const std::filesystem::path& out_dir,
+                              const Reporter& reporter, const nlohmann::json& extra) {
+  o.Check();
+  AtomicDirectory output(out_dir, "manifest.json");
+  const std::filesystem::path& dir = output.temp_path();
+  const Board board = MakeBoard(o, model.tile_size_mm());
+  const auto pairs = SelectPhotos(o);
+  for (const auto& [v, l] : pairs) MakeCamera(o, board, o.views[v]);  // fail fast on impossible views
+  const double intensity =
+      o.light_intensity > 0 ? o.light_intensity : (o.light_distance_mm > 0 ? o.light_distance_mm * o.light_distance_mm : 1.0);
+  Manifest manifest = PhotoManifest(o, model, extra);
+  std::vector<PhotoTruth> truth;
+  PhotoSummary summary;
+  PhaseTimes times;
+  const ImageWriteOptions wopt = PhotoWriteOptions(o);
+  const std::string ext = o.format == "exr" ? ".exr" : (o.format == "jpeg" ? ".jpg" : ".png");
+  const SensorPattern sensor = MakeSensorPattern(o);
+  if (o.vignetting > 0 || o.dark_level > 0) WriteReferenceFrames(o, sensor, dir, ext, wopt, &manifest);
   for (std::size_t k = 0; k < pairs.size(); ++k) {
     reporter.Progress(k, pairs.size(), "photos");
     const auto [vi, li] = pairs[k];
@@ -593,21 +702,9 @@ PhotoSummary SynthesizePhotos(const PhotoOptions& o, const SvbrdfModel& model, c
     for (std::size_t b = 0; b < factors.size(); ++b) {
       const double eb = exposure * factors[b];
       const std::uint64_t stream = (k + b * pairs.size()) * 2;  // bracket 0: the single photo's noise
-      Image shot = img;
-      for (std::size_t i = 0; i < shot.pixels.size(); ++i) {
-        double x = eb * gain[i / std::size_t(img.channels)] * img.pixels[i] + dark[i / std::size_t(img.channels)];
-        if (o.noise > 0) {  // Box-Muller on a hash: the same noise whatever the thread count
-          const double u1 = std::max(HashUniform(o.seed, stream + 1, i), 1e-300), u2 = HashUniform(o.seed, stream + 2, i);
-          x += o.noise * std::sqrt(-2 * std::log(u1)) * std::cos(2 * kPi * u2);
-        }
-        x = std::max(0.0, x);
-        if (!o.brackets.empty()) x = std::min(1.0, x);  // the white level (integer writing clips there anyway)
-        if (o.response_gamma > 0) x = CameraResponse(o, x);
-        shot.pixels[i] = static_cast<float>(x);
-      }
       const std::string file = o.brackets.empty() ? fmt::format("v{:03d}_l{:03d}{}", vi, li, ext)
                                                   : fmt::format("v{:03d}_l{:03d}_e{}{}", vi, li, b, ext);
-      WriteImage(dir / file, shot, wopt);
+      WriteImage(dir / file, ExposeShot(img, eb, sensor, o, stream), wopt);
       if (!o.brackets.empty()) e.brackets.push_back({file, eb});
       summary.files.push_back(file);
     }
@@ -624,30 +721,7 @@ PhotoSummary SynthesizePhotos(const PhotoOptions& o, const SvbrdfModel& model, c
     e.camera_distance_mm = o.camera_distance_mm;
     e.camera = cam.camera;
     manifest.photos.push_back(e);
-    PhotoTruth tr;
-    tr.file = file;
-    tr.image_from_plate = cam.PlateHomography();
-    tr.camera_from_plate_rotation = cam.camera_from_plate_rotation;
-    tr.camera_from_plate_translation = cam.camera_from_plate_translation;
-    for (const Marker& m : board.markers) {
-      std::array<Vec2, 4> px;
-      bool visible = true;
-      for (int q = 0; q < 4; ++q) {
-        visible = visible && cam.Project(Vec3(m.corners_mm[q].x(), m.corners_mm[q].y(), m.height_mm), &px[q]);
-        visible = visible && px[q].x() >= 1 && px[q].y() >= 1 && px[q].x() <= o.width - 2 && px[q].y() <= o.height - 2;
-      }
-      if (visible) tr.marker_corners_px[m.id] = px;
-    }
-    if (board.charuco.valid()) {
-      const std::vector<Vec2> corners = CharucoCornersMm(board.charuco);
-      for (std::size_t id = 0; id < corners.size(); ++id) {
-        Vec2 px;
-        if (cam.Project(Vec3(corners[id].x(), corners[id].y(), 0), &px) && px.x() >= 1 && px.y() >= 1 &&
-            px.x() <= o.width - 2 && px.y() <= o.height - 2)
-          tr.charuco_corners_px[static_cast<int>(id)] = px;
-      }
-    }
-    truth.push_back(std::move(tr));
+    truth.push_back(TruthOf(cam, board, o, file));
   }
   reporter.Progress(pairs.size(), pairs.size(), "photos");
   WriteBoard(dir / "board.json", board);

@@ -108,9 +108,6 @@ CameraPose MakeCamera(const PhotoOptions& options, const Board& board, const Vec
 Image RenderPhoto(const SvbrdfModel& model, const Board& board, const PhotoOptions& options, const CameraPose& cam,
                   const Vec3& view_dir, const Vec3& light_dir);
 
-// The camera response of `options` (response_gamma > 0): linear value in [0, 1] -> stored value in [0, 1].
-double CameraResponse(const PhotoOptions& options, double linear);
-
 // The (view index, light index) pairs to shoot: the subsets, then the even spread.
 std::vector<std::pair<int, int>> SelectPhotos(const PhotoOptions& options);
 

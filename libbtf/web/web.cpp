@@ -158,12 +158,18 @@ RenderOptions WebSceneOptions(const std::string& scene, int width, int height) {
   return o;
 }
 
+namespace {
+
+// Tone mapping of both renderers: display value = sRGB(clamp(exposure * radiance, 0, 1)); this
+// returns exposure * radiance clamped to [0, 1] (write it with ImageWriteOptions::srgb = true).
 Image ToneMap(const Image& linear, double exposure) {
   Image out = linear;
   for (auto& v : out.pixels) v = std::clamp(float(v * exposure), 0.0f, 1.0f);
   return out;
 }
 
+// scene.json for the viewer: everything the page needs to draw `options` as Render does
+// (camera, shape, tiles, light, background, environment samples, exposure, size).
 nlohmann::json ViewerSceneJson(const RenderOptions& o, double exposure) {
   o.Check();
   const RenderCamera cam;
@@ -186,6 +192,8 @@ nlohmann::json ViewerSceneJson(const RenderOptions& o, double exposure) {
           {"environment", {{"name", o.environment}, {"directions", dirs}, {"radiance_solid_angle", rad}}}};
 }
 
+// An export folder (either layout) as a BtfEvaluator through its reference decoder (nearest texel
+// for uv, as DatasetEvaluator).
 std::unique_ptr<BtfEvaluator> OpenExportEvaluator(const std::filesystem::path& dir) {
   std::ifstream in(dir / "manifest.json");
   const nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
@@ -193,6 +201,8 @@ std::unique_ptr<BtfEvaluator> OpenExportEvaluator(const std::filesystem::path& d
     return std::make_unique<ExportBtfEvaluator<SattlerReferenceDecoder>>(dir);
   return std::make_unique<ExportBtfEvaluator<SchneiderReferenceDecoder>>(dir);  // its errors name what is wrong
 }
+
+}  // namespace
 
 nlohmann::json CpuRenderSummary::ToJson() const {
   return {{"output", output}, {"source", source}, {"source_kind", source_kind}, {"scene", scene},

@@ -4,7 +4,6 @@
 // folder through its reference decoder, and runs of the viewer in headless Chromium (through node
 // and playwright-core: viewer/render.mjs) or as a local server (viewer/server.mjs).
 #include <filesystem>
-#include <memory>
 #include <string>
 #include <vector>
 
@@ -20,18 +19,6 @@ namespace btf {
 std::vector<std::string> WebSceneNames();
 RenderOptions WebSceneOptions(const std::string& scene, int width, int height);
 
-// Tone mapping of both renderers: display value = sRGB(clamp(exposure * radiance, 0, 1)); this
-// returns exposure * radiance clamped to [0, 1] (write it with ImageWriteOptions::srgb = true).
-Image ToneMap(const Image& linear, double exposure);
-
-// scene.json for the viewer: everything the page needs to draw `options` as Render does
-// (camera, shape, tiles, light, background, environment samples, exposure, size).
-nlohmann::json ViewerSceneJson(const RenderOptions& options, double exposure);
-
-// An export folder (either layout) as a BtfEvaluator through its reference decoder (nearest texel
-// for uv, as DatasetEvaluator).
-std::unique_ptr<BtfEvaluator> OpenExportEvaluator(const std::filesystem::path& export_dir);
-
 struct CpuRenderSummary {
   std::string output, source, source_kind, scene;  // source_kind: export, codec or dataset
   int width = 0, height = 0;
@@ -41,8 +28,9 @@ struct CpuRenderSummary {
 };
 
 // The CPU renderer's picture of `source` (an export folder, a codec or a dataset file) under
-// `scene`, tone-mapped (ToneMap) and written as an sRGB PNG (atomically) to `png`; `linear` (if
-// non-null) gets the radiance image before tone mapping.
+// `scene`, tone-mapped as in the viewer (display value = sRGB(clamp(exposure * radiance, 0, 1)))
+// and written as an sRGB PNG (atomically) to `png`; `linear` (if non-null) gets the radiance
+// image before tone mapping.
 CpuRenderSummary RenderCpu(const std::filesystem::path& source, const RenderOptions& scene, double exposure,
                            const std::filesystem::path& png, const std::string& scene_name = "", Image* linear = nullptr);
 

@@ -118,7 +118,7 @@ TEST(Pca, LpcaGramLimitTakesTheRandomizedPathForLargeClustersAndItLosesLittle) {
   // subtracts the captured energy, about 1e4 times the residual here, so its float rounding
   // moves it by ~1e-4 relative: measured 1.5e-4 below the Gram's with the blocked passes, 6.8e-5
   // above with whole-matrix products); measured -3.9e-8 with one pass per subspace iteration
-  // (2026-12-03), bounded at 1e-3.
+  // bounded at 1e-3.
   const double excess = ReconstructionError(X, rnd) / ReconstructionError(X, gram) - 1;
   EXPECT_GT(excess, -1e-6);
   EXPECT_LT(excess, 1e-3);
@@ -154,7 +154,7 @@ TEST(Pca, WarmStartFromAPreviousFitLosesLittle) {
   // moves it by ~1e-3 relative). From the previous basis and warm_oversampling (4) Gaussian
   // columns, one subspace iteration: measured 3.1e-8 above the Gram's (the optimum up to
   // rounding, so at rounding level); bounded at 1e-5 (300x margin, 100x below the cold randomized
-  // path's bound above). With 10 columns (the default until 2026-12-03) 2.4e-8: the 4 columns
+  // path's bound above). With 10 columns (the former default) 2.4e-8: the 4 columns
   // lose 7e-9 against them, bounded at 1e-6.
   const double excess = ReconstructionError(X, warm) / ReconstructionError(X, gram) - 1;
   EXPECT_GT(excess, -1e-6);

@@ -76,7 +76,7 @@ TEST(LpcaSplitMerge, LeavesTheKMeansMinimumForOneClusterPerLine) {
     std::printf("seed %d: truth %.6f, without split/merge %.6f, with %.6f (%zu trials)\n", int(seed), truth,
                 plain.relative_error, split.relative_error, split.split_errors.size());
     EXPECT_TRUE(plain.split_errors.empty());
-    // Measured (2026-12-03, seeds 1, 2, 3): truth 0.001911; without split/merge 0.008645,
+    // Measured (seeds 1, 2, 3): truth 0.001911; without split/merge 0.008645,
     // 0.007001, 0.008645 (3.7-4.5x the truth: a cluster holds two short lines); with it 0.001841
     // for each (0.96x: the fitted lines also take a little of the noise), after 2-3 trials. The
     // bounds: without above 3x the truth, with at most 1.1x it (10 % over the noise floor).

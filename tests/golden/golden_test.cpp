@@ -2,7 +2,7 @@
 // build (tests/golden/digests.json). A refactoring that changes no format and no algorithm must
 // leave them identical; an intended change of the outputs regenerates the file with
 //   BTF_GOLDEN_UPDATE=1 build/tests/test_golden_fast
-// and says why in the commit. (Recorded again once during #12: the error figures in codec
+// and says why in the commit. (Recorded again once when the error figures in codec
 // provenance became independent of the thread count, which changed their last bits; the codec
 // arrays, datasets, photos, registration reports and exports were unchanged.)
 //

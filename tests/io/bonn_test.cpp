@@ -45,57 +45,7 @@ void ExpectBadInput(F f, const std::vector<std::string>& fragments) {
   }
 }
 
-// ---- half floats ----
-
-TEST(Half, EveryHalfSurvivesTheRoundTripAndKnownPatternsDecode) {
-  for (std::uint32_t h = 0; h < 65536; ++h) {
-    const float f = HalfToFloat(std::uint16_t(h));
-    if (std::isnan(f)) {
-      EXPECT_TRUE(std::isnan(HalfToFloat(FloatToHalf(f))));
-      continue;
-    }
-    ASSERT_EQ(FloatToHalf(f), h) << h;
-  }
-  EXPECT_EQ(HalfToFloat(0x3c00), 1.0f);
-  EXPECT_EQ(HalfToFloat(0xc000), -2.0f);
-  EXPECT_EQ(HalfToFloat(0x7bff), 65504.0f);
-  EXPECT_EQ(HalfToFloat(0x0001), std::ldexp(1.0f, -24));  // smallest subnormal
-  EXPECT_EQ(HalfToFloat(0x3555), 0.333251953125f);
-  // Ties round to even: 1 + 2^-11 lies halfway between 1 and 1 + 2^-10.
-  EXPECT_EQ(FloatToHalf(1.0f + std::ldexp(1.0f, -11)), 0x3c00);
-  EXPECT_EQ(FloatToHalf(1.0f + 3 * std::ldexp(1.0f, -11)), 0x3c02);
-  EXPECT_EQ(FloatToHalf(65519.0f), 0x7bff);
-  EXPECT_EQ(FloatToHalf(65520.0f), 0x7c00);  // rounds past the largest half: infinity
-  EXPECT_EQ(FloatToHalf(std::ldexp(1.0f, -25)), 0x0000);  // tie between 0 and the smallest subnormal
-  EXPECT_EQ(FloatToHalf(std::ldexp(1.5f, -25)), 0x0001);
-}
-
-// The bulk conversions (F16C where built for it) give the scalar functions' bits: every half, and
-// floats around every half's rounding boundaries (ties, just above and below, past 65504), in
-// runs of any length (the vector body and the scalar tail).
-TEST(Half, BulkConversionsEqualTheScalarOnes) {
-  std::vector<std::uint16_t> halves;
-  for (std::uint32_t h = 0; h < 65536; ++h)
-    if (!std::isnan(HalfToFloat(std::uint16_t(h)))) halves.push_back(std::uint16_t(h));
-  std::vector<float> floats(halves.size());
-  HalvesToFloats(halves.data(), floats.data(), halves.size());
-  for (std::size_t i = 0; i < halves.size(); ++i) ASSERT_EQ(floats[i], HalfToFloat(halves[i])) << halves[i];
-  std::vector<float> probes;
-  for (std::uint32_t h = 0; h < 0x7c00; ++h) {
-    const float lo = HalfToFloat(std::uint16_t(h)), hi = h < 0x7bff ? HalfToFloat(std::uint16_t(h + 1)) : 65536.0f;
-    const float mid = lo + (hi - lo) / 2;
-    for (const float f : {mid, std::nextafter(mid, 0.0f), std::nextafter(mid, 1e9f)}) probes.push_back(f), probes.push_back(-f);
-  }
-  probes.push_back(1e6f), probes.push_back(-std::numeric_limits<float>::infinity());
-  for (const std::size_t n : {probes.size(), std::size_t(7), std::size_t(13)}) {
-    std::vector<std::uint16_t> out(n);
-    FloatsToHalves(probes.data(), out.data(), n);
-    for (std::size_t i = 0; i < n; ++i) ASSERT_EQ(out[i], FloatToHalf(probes[i])) << probes[i];
-    std::vector<float> rounded(probes.begin(), probes.begin() + std::ptrdiff_t(n));
-    RoundToHalves(rounded.data(), n);
-    for (std::size_t i = 0; i < n; ++i) ASSERT_EQ(rounded[i], HalfToFloat(FloatToHalf(probes[i]))) << probes[i];
-  }
-}
+// ---- float16 storage (the conversions themselves: tests/io/half_test.cpp) ----
 
 TEST(Half, Float16StorageRoundsAsFloatToHalf) {
   // float16 datasets are converted by libbtf (io/half.h), not by HDF5, whose 1.10.8 conversion

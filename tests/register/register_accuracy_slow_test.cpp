@@ -100,7 +100,7 @@ TEST(RegisterAccuracy, PerElevationUpTo75Degrees) {
   }
 }
 
-// Issue #13's 2 % at 75 deg, for a camera with 3 x the pixels per mm of the table's (3840 x 2880,
+// The 2 % bound at 75 deg, for a camera with 3 x the pixels per mm of the table's (3840 x 2880,
 // 11 megapixels, same 500 mm and field of view): a texel then spans 4.4 px across its
 // foreshortened side instead of 1.5. btf-register run --filter spline against the 32 x 32 truth.
 TEST(RegisterAccuracy, SeventyFiveDegreesWithinTwoPercentAtThreeTimesThePixels) {
@@ -137,7 +137,7 @@ TEST(RegisterAccuracy, SeventyFiveDegreesWithinTwoPercentAtThreeTimesThePixels) 
   }
 }
 
-// Issue #13's 2 % at 75 deg on the table's 1280 x 960 photos, for a periodic sample: the unit
+// The 2 % bound at 75 deg on the table's 1280 x 960 photos, for a periodic sample: the unit
 // tile reconstructed from every photo pixel (--tile-average --tile-method reconstruct) against the
 // plain tile average (--tile-average) and the per-texel rectification, at 0, 60 and 75 deg (view 0
 // is in the run: the lattice is estimated on the most frontal view, here rectified at 128 x 128:

@@ -1,4 +1,4 @@
-// Where the registration error at steep views comes from (issue #13): each candidate cause
+// Where the registration error at steep views comes from: each candidate cause
 // measured on its own against btf-synth truth, at 60 and 75 deg (bonn81 views 45 and 70).
 // docs/btf-register.md, "Accuracy at steep views", gives the table these tests print:
 //   build-dev/tests/test_register_slow --gtest_filter='SteepViews.*'

@@ -1,4 +1,4 @@
-// The issue #13 "done when" checks on btf-synth ground truth (slow: tens of seconds).
+// The registration accuracy checks on btf-synth ground truth (slow: tens of seconds).
 #include <gtest/gtest.h>
 
 #include <cmath>

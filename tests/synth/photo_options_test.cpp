@@ -1,4 +1,4 @@
-// btf-synth photos' real-camera options (issue #13): AprilGrid target, border bits, encodings, blur.
+// btf-synth photos' real-camera options: AprilGrid target, border bits, encodings, blur.
 #include <gtest/gtest.h>
 
 #include "libbtf/core/error.h"

@@ -145,7 +145,7 @@ Agreement Compare(const RenderOptions& scene, const Image& cpu, const Image& web
 
 // render-web against the CPU render of the same export (SchneiderReferenceDecoder through
 // ExportEvaluator): same camera, light, exposure and tone mapping, both 8-bit sRGB PNGs.
-// Tolerances (issue 17): mean |diff| <= 1 % of the CPU image's 99th-percentile luminance, and
+// Tolerances: mean |diff| <= 1 % of the CPU image's 99th-percentile luminance, and
 // no pixel off by more than 5 % of it away from silhouettes. What may differ: float32 against
 // double arithmetic (the ray, uv and the concentric map), GPU trilinear filtering, 8-bit sRGB
 // rounding (half a step of 1/255 in display values: <= 0.5 % of the level at the level).
