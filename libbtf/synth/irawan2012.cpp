@@ -39,10 +39,9 @@ double ScaledI0(double x) {
   return (1 + t * (1.0 / 8 + t * (9.0 / 128 + t * 225.0 / 3072))) / std::sqrt(2 * kPi * x);
 }
 
-// 1 / (2 pi e^{-|b|} I0(|b|)): the part of VonMises that depends on b alone (cached per kernel).
-double VonMisesNorm(double b) { return 1 / (2 * kPi * ScaledI0(std::abs(b))); }
-
 }  // namespace
+
+double VonMisesNorm(double b) { return 1 / (2 * kPi * ScaledI0(std::abs(b))); }
 
 double VonMises(double cos_x, double b) { return std::exp(b * cos_x - std::abs(b)) * VonMisesNorm(b); }
 
