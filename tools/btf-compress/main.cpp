@@ -6,6 +6,7 @@
 #include <optional>
 
 #include "libbtf/compress/codec.h"
+#include "libbtf/compress/codec_source.h"
 #include "libbtf/compress/compress.h"
 #include "libbtf/export/sattler.h"
 #include "libbtf/export/schneider.h"
@@ -40,10 +41,7 @@ int RunCompress(const CLI::App& app, const btf::cli::CommonFlags& common, Compre
   if (f.options.method == btf::CodecMethod::kLpcaTensor) btf::cli::RequireSingleRank("btf-compress --method " + f.method);
   // Claim the output before the work: an unwritable folder fails now, not after the compression.
   std::optional<btf::AtomicOutput> target;
-  if (btf::cli::PrintingRank()) {
-    target.emplace(f.output);
-    target->Reserve();
-  }
+  if (btf::cli::PrintingRank()) target.emplace(f.output, btf::AtomicOutput::kReserve);
   // A dataset file or a Bonn .btf file (decoded one view slot at a time).
   const auto input = btf::OpenCompressInput(f.dataset, btf::cli::DatasetReadOptionsFromEnvironment());
   const btf::CompressSummary s = btf::CompressToFile(f.options, *input, target ? &*target : nullptr, "btf-compress",
