@@ -1,0 +1,536 @@
+#include "libbtf/compress/neural_net.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include "libbtf/core/error.h"
+
+namespace btf {
+namespace {
+
+// SplitMix64 (Steele, Lea & Flood 2014): the seeded stream behind every random choice here, so
+// that the same seed gives the same numbers with any standard library.
+struct SplitMix64 {
+  std::uint64_t state;
+  std::uint64_t Next() {
+    std::uint64_t z = (state += 0x9E3779B97F4A7C15ull);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+  }
+  double Uniform() { return double(Next() >> 11) * 0x1.0p-53; }  // [0, 1)
+  std::uint64_t Below(std::uint64_t n) { return std::uint64_t((unsigned __int128)Next() * n >> 64); }
+};
+
+std::uint64_t Mix(std::uint64_t seed, std::uint64_t stream) {
+  SplitMix64 r{seed ^ (stream * 0xD1B54A32D192ED03ull)};
+  r.Next();
+  return r.Next();
+}
+
+constexpr float kLeakySlope = 0.01f;
+
+// d[i] *= (z[i] > 0 ? 1 : slope). Written so that GCC 12 vectorizes it (checked with
+// -fopt-info-vec): a factor chosen between two constants into a temporary; the same select
+// written inline, or a choice between two computed values, stays a scalar loop with a branch on
+// the sign (with Eigen 3.4's select(), which is scalar too), 3x slower on random signs.
+template <typename S>
+void ScaleNonPositive(const S* __restrict z, S* __restrict d, Eigen::Index n, S slope) {
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const S f = z[i] > S(0) ? S(1) : slope;
+    d[i] = d[i] * f;
+  }
+}
+
+// a = act(z), elementwise over n values: ReLU and leaky ReLU as vectorizable loops, softplus and
+// SiLU through Eigen's vectorized exp. SiLU keeps sigmoid(z) in sig (n values) for the backward
+// pass, which then needs no exp.
+template <typename S>
+void Activate(Activation act, const S* __restrict z, S* __restrict a, S* __restrict sig, Eigen::Index n) {
+  using Array = Eigen::Array<S, Eigen::Dynamic, 1>;
+  const Eigen::Map<const Array> zm(z, n);
+  Eigen::Map<Array> am(a, n);
+  switch (act) {
+    case Activation::kRelu:
+      for (Eigen::Index i = 0; i < n; ++i) a[i] = z[i] > S(0) ? z[i] : S(0);
+      break;
+    case Activation::kLeakyRelu:
+      std::copy(z, z + n, a);
+      ScaleNonPositive(z, a, n, S(kLeakySlope));
+      break;
+    // max(z, 0) + log1p(exp(-|z|)): no overflow for large |z|.
+    case Activation::kSoftplus: am = zm.max(S(0)) + (-zm.abs()).exp().log1p(); break;
+    // z sigmoid(z) with sigmoid = 1 / (1 + exp(-z)): exp overflows to inf for z < -88 (float),
+    // giving sigmoid 0 and z * 0 = -0, the limit.
+    case Activation::kSilu: {
+      Eigen::Map<Array> sm(sig, n);
+      sm = S(1) / (S(1) + (-zm).exp());
+      am = zm * sm;
+      break;
+    }
+  }
+}
+
+// d *= act'(z), elementwise over n values (sig: what Activate kept).
+template <typename S>
+void ActivationBackward(Activation act, const S* __restrict z, const S* __restrict sig, S* __restrict d,
+                        Eigen::Index n) {
+  using Array = Eigen::Array<S, Eigen::Dynamic, 1>;
+  const Eigen::Map<const Array> zm(z, n);
+  Eigen::Map<Array> dm(d, n);
+  switch (act) {
+    case Activation::kRelu:
+      for (Eigen::Index i = 0; i < n; ++i) d[i] = z[i] > S(0) ? d[i] : S(0);
+      break;
+    case Activation::kLeakyRelu: ScaleNonPositive(z, d, n, S(kLeakySlope)); break;
+    case Activation::kSoftplus: dm = dm / (S(1) + (-zm).exp()); break;
+    case Activation::kSilu: {
+      // d/dz z s(z) = s (1 + z (1 - s)); s in [0, 1], finite for every z.
+      const Eigen::Map<const Array> sm(sig, n);
+      dm = dm * sm * (S(1) + zm * (S(1) - sm));
+      break;
+    }
+  }
+}
+
+}  // namespace
+
+std::string_view ActivationName(Activation a) {
+  switch (a) {
+    case Activation::kRelu: return "relu";
+    case Activation::kLeakyRelu: return "leaky_relu";
+    case Activation::kSoftplus: return "softplus";
+    case Activation::kSilu: return "silu";
+  }
+  return "?";
+}
+
+void DirectionEncoding::Check() const { BTF_CHECK_OPTION(fourier >= 0 && fourier <= 8, "fourier", fourier); }
+
+void EncodeDirections(const DirectionEncoding& e, const float* wi, const float* wo, float* out) {
+  out[0] = wi[0];
+  out[1] = wi[1];
+  out[2] = wo[0];
+  out[3] = wo[1];
+  int k = 4;
+  if (e.half_vector) {
+    const float h[3] = {wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]};
+    const float norm2 = h[0] * h[0] + h[1] * h[1] + h[2] * h[2];
+    const float s = norm2 > 1e-24f ? 1 / std::sqrt(norm2) : 0.f;  // wi = -wo: no half vector, (0, 0)
+    out[k++] = h[0] * s;
+    out[k++] = h[1] * s;
+  }
+  for (int f = 0; f < e.fourier; ++f)
+    for (int b = 0; b < 4; ++b) {
+      const double x = std::ldexp(std::numbers::pi, f) * out[b];
+      out[k++] = float(std::sin(x));
+      out[k++] = float(std::cos(x));
+    }
+}
+
+void NeuralNetShape::Check() const {
+  BTF_CHECK_OPTION(inputs >= 1 && inputs <= 4096, "inputs", inputs);
+  BTF_CHECK_OPTION(outputs >= 1 && outputs <= 4096, "outputs", outputs);
+  BTF_CHECK_OPTION(hidden.size() <= 16, "hidden", "at most 16 layers");
+  for (const int h : hidden) BTF_CHECK_OPTION(h >= 1 && h <= 4096, "hidden", h);
+}
+
+template <typename Scalar>
+BasicNeuralNet<Scalar>::BasicNeuralNet(const NeuralNetShape& shape, std::uint64_t seed) : shape_(shape) {
+  shape_.Check();
+  Eigen::Index size = 0;
+  for (int l = 0, in = shape_.inputs; l < layers(); ++l) {
+    const int out = l + 1 < layers() ? shape_.hidden[l] : shape_.outputs;
+    offsets_.push_back(size);
+    size += Eigen::Index(out) * (in + 1);
+    in = out;
+  }
+  params_.assign(size, Scalar(0));
+  SplitMix64 rng{Mix(seed, 0x6e6574)};
+  for (int l = 0; l < layers(); ++l) {
+    const Eigen::Index in = weight(l).cols(), n = weight(l).size();
+    const double bound = std::sqrt((l + 1 < layers() ? 6.0 : 3.0) / double(in));
+    for (Eigen::Index i = 0; i < n; ++i) params_[offsets_[l] + i] = Scalar(bound * (2 * rng.Uniform() - 1));
+  }
+}
+
+template <typename Scalar>
+Eigen::Map<const typename BasicNeuralNet<Scalar>::Matrix> BasicNeuralNet<Scalar>::weight(int layer) const {
+  const int in = layer == 0 ? shape_.inputs : shape_.hidden[layer - 1];
+  const int out = layer + 1 < layers() ? shape_.hidden[layer] : shape_.outputs;
+  return Eigen::Map<const Matrix>(params_.data() + offsets_[layer], out, in);
+}
+
+template <typename Scalar>
+Eigen::Index BasicNeuralNet<Scalar>::bias_offset(int layer) const {
+  const auto w = weight(layer);
+  return offsets_[layer] + w.size();
+}
+
+template <typename Scalar>
+Eigen::Map<const typename BasicNeuralNet<Scalar>::Vector> BasicNeuralNet<Scalar>::bias(int layer) const {
+  return Eigen::Map<const Vector>(params_.data() + bias_offset(layer), weight(layer).rows());
+}
+
+template <typename Scalar>
+const typename BasicNeuralNet<Scalar>::Matrix& BasicNeuralNet<Scalar>::Forward(const Eigen::Ref<const Matrix>& X,
+                                                                               Workspace& ws) const {
+  BTF_CHECK(X.rows() == shape_.inputs);
+  const int L = layers();
+  ws.z.resize(L);
+  ws.a.resize(L);
+  ws.sig.resize(L);
+  for (int l = 0; l < L; ++l) {
+    Matrix& z = ws.z[l];
+    if (l == 0)
+      z.noalias() = weight(0) * X;
+    else
+      z.noalias() = weight(l) * ws.a[l - 1];
+    z.colwise() += bias(l);
+    if (l + 1 < L) {
+      ws.a[l].resize(z.rows(), z.cols());
+      Scalar* sig = nullptr;
+      if (shape_.activation == Activation::kSilu) {
+        ws.sig[l].resize(z.rows(), z.cols());
+        sig = ws.sig[l].data();
+      }
+      Activate(shape_.activation, z.data(), ws.a[l].data(), sig, z.size());
+    }
+  }
+  return ws.z.back();
+}
+
+template <typename Scalar>
+void BasicNeuralNet<Scalar>::Backward(const Eigen::Ref<const Matrix>& X, const Eigen::Ref<const Matrix>& dY,
+                                      Workspace& ws, Scalar* grad, Matrix* dX) const {
+  const int L = layers();
+  BTF_CHECK(int(ws.z.size()) == L && dY.rows() == shape_.outputs && dY.cols() == X.cols());
+  ws.delta = dY;
+  for (int l = L - 1; l >= 0; --l) {
+    const auto W = weight(l);
+    Eigen::Map<Matrix> gW(grad + offsets_[l], W.rows(), W.cols());
+    if (l == 0)
+      gW.noalias() += ws.delta * X.transpose();
+    else
+      gW.noalias() += ws.delta * ws.a[l - 1].transpose();
+    // Bias gradient: the columns summed in column order (a fixed order, whatever the alignment).
+    Eigen::Map<Vector> gb(grad + bias_offset(l), W.rows());
+    for (Eigen::Index j = 0; j < ws.delta.cols(); ++j) gb += ws.delta.col(j);
+    if (l > 0) {
+      ws.next.noalias() = W.transpose() * ws.delta;
+      ws.delta.swap(ws.next);
+      ActivationBackward(shape_.activation, ws.z[l - 1].data(), ws.sig[l - 1].data(), ws.delta.data(),
+                         ws.delta.size());
+    } else if (dX) {
+      dX->noalias() = W.transpose() * ws.delta;
+    }
+  }
+}
+
+template class BasicNeuralNet<float>;
+template class BasicNeuralNet<double>;
+
+void AdamOptions::Check() const {
+  BTF_CHECK_OPTION(beta1 >= 0 && beta1 < 1, "beta1", beta1);
+  BTF_CHECK_OPTION(beta2 >= 0 && beta2 < 1, "beta2", beta2);
+  BTF_CHECK_OPTION(epsilon > 0 && std::isfinite(epsilon), "epsilon", epsilon);
+}
+
+namespace {
+// One Adam update of n values whose moments have seen t updates (this one included).
+void AdamUpdate(const AdamOptions& o, std::int64_t t, double lr, float* p, const float* g, float* m, float* v,
+                Eigen::Index n) {
+  const float b1 = float(o.beta1), b2 = float(o.beta2);
+  // lr sqrt(1 - beta2^t) / (1 - beta1^t) and epsilon sqrt(1 - beta2^t): Kingma & Ba's
+  // "more efficient" order, the same update as with m_hat and v_hat.
+  const double c2 = std::sqrt(1 - std::pow(o.beta2, double(t)));
+  const float step = float(lr * c2 / (1 - std::pow(o.beta1, double(t))));
+  const float eps = float(o.epsilon * c2);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    m[i] = b1 * m[i] + (1 - b1) * g[i];
+    v[i] = b2 * v[i] + (1 - b2) * g[i] * g[i];
+    p[i] -= step * m[i] / (std::sqrt(v[i]) + eps);
+  }
+}
+}  // namespace
+
+Adam::Adam(Eigen::Index size, const AdamOptions& options) : o_(options), m_(size, 0.f), v_(size, 0.f) { o_.Check(); }
+
+void Adam::Step(float* params, const float* grad, double learning_rate) {
+  ++t_;
+  AdamUpdate(o_, t_, learning_rate, params, grad, m_.data(), v_.data(), Eigen::Index(m_.size()));
+}
+
+LazyAdam::LazyAdam(Eigen::Index rows, int width, const AdamOptions& options)
+    : o_(options), width_(width), m_(std::size_t(rows) * width, 0.f), v_(m_.size(), 0.f), t_(rows, 0) {
+  o_.Check();
+}
+
+void LazyAdam::StepRow(Eigen::Index row, float* row_values, const float* grad, double learning_rate) {
+  const std::size_t at = std::size_t(row) * width_;
+  AdamUpdate(o_, ++t_[row], learning_rate, row_values, grad, m_.data() + at, v_.data() + at, width_);
+}
+
+
+void NeuralSamples::Check() const {
+  const std::int64_t n = size();
+  if (texels < 1 || texels > std::int64_t(INT32_MAX)) ThrowBadInput("neural samples: {} texels (need 1..2^31-1)", texels);
+  if (channels < 1 || channels > 4096) ThrowBadInput("neural samples: {} channels (need 1..4096)", channels);
+  if (n < 1) ThrowBadInput("neural samples: none");
+  if (std::int64_t(wi.size()) != 3 * n || std::int64_t(wo.size()) != 3 * n ||
+      std::int64_t(target.size()) != channels * n)
+    ThrowBadInput("neural samples: {} texel indices but {} wi, {} wo and {} target values (need 3, 3 and {} per sample)",
+                  n, wi.size(), wo.size(), target.size(), channels);
+  for (std::int64_t i = 0; i < n; ++i) {
+    if (texel[i] < 0 || texel[i] >= texels) ThrowBadInput("neural samples: sample {} has texel {} (of {})", i, texel[i], texels);
+    for (const float* w : {&wi[3 * i], &wo[3 * i]}) {
+      const double norm2 = double(w[0]) * w[0] + double(w[1]) * w[1] + double(w[2]) * w[2];
+      // Unit vectors, to float rounding of measured data; also refuses NaN and Inf.
+      if (!(std::abs(norm2 - 1) <= 1e-2))
+        ThrowBadInput("neural samples: sample {} has a direction ({}, {}, {}) that is not a unit vector", i, w[0], w[1], w[2]);
+    }
+  }
+  for (std::size_t k = 0; k < target.size(); ++k)
+    if (!std::isfinite(target[k]))
+      ThrowBadInput("neural samples: target value {} of sample {} is {}", k % channels, k / channels, target[k]);
+}
+
+void NeuralModel::Evaluate(const std::int32_t* texel, const float* wi, const float* wo, Eigen::Index n,
+                           Eigen::MatrixXf* out) const {
+  const int E = encoding.Width(), C = net.shape().outputs;
+  BTF_CHECK(net.shape().inputs == latent + E && latents.rows() == latent);
+  for (Eigen::Index i = 0; i < n; ++i)
+    if (texel[i] < 0 || texel[i] >= latents.cols())
+      ThrowBadInput("neural model: sample {} asks for texel {} (of {})", i, texel[i], latents.cols());
+  out->resize(C, n);
+  constexpr Eigen::Index kChunk = 1024;
+  const Eigen::Index chunks = (n + kChunk - 1) / kChunk;
+#pragma omp parallel
+  {
+    NeuralNet::Workspace ws;
+    Eigen::MatrixXf X;
+#pragma omp for schedule(dynamic, 1)
+    for (Eigen::Index c = 0; c < chunks; ++c) {
+      const Eigen::Index begin = c * kChunk, count = std::min(kChunk, n - begin);
+      X.resize(latent + E, count);
+      for (Eigen::Index j = 0; j < count; ++j) {
+        const Eigen::Index i = begin + j;
+        X.col(j).head(latent) = latents.col(texel[i]);
+        EncodeDirections(encoding, wi + 3 * i, wo + 3 * i, X.col(j).data() + latent);
+      }
+      out->middleCols(begin, count) = net.Forward(X, ws);
+    }
+  }
+}
+
+void NeuralTrainOptions::Check() const {
+  BTF_CHECK_OPTION(latent >= 0 && latent <= 256, "latent", latent);
+  encoding.Check();  // before its Width() is used
+  NeuralNetShape{latent + encoding.Width(), hidden, 1, activation}.Check();
+  adam.Check();
+  BTF_CHECK_OPTION(batch >= 1 && batch <= (1 << 24), "batch", batch);
+  BTF_CHECK_OPTION(block >= 1 && block <= batch, "block", block);
+  BTF_CHECK_OPTION(steps >= 0, "steps", steps);
+  BTF_CHECK_OPTION(steps > 0 || (epochs > 0 && epochs <= 1e6), "epochs", epochs);
+  BTF_CHECK_OPTION(learning_rate > 0 && learning_rate < 1e3, "learning_rate", learning_rate);
+  BTF_CHECK_OPTION(latent_learning_rate >= 0 && latent_learning_rate < 1e3, "latent_learning_rate", latent_learning_rate);
+  BTF_CHECK_OPTION(final_learning_rate > 0 && final_learning_rate <= 1, "final_learning_rate", final_learning_rate);
+  BTF_CHECK_OPTION(latent_init >= 0 && latent_init <= 10, "latent_init", latent_init);
+}
+
+void BlockGradient::Clear() {
+  parameters.clear();
+  texels.clear();
+  latents.clear();
+  squared_error = 0;
+  values = 0;
+}
+
+StepGradient ReduceInOrder(std::span<const BlockGradient> blocks, int latent, std::vector<std::int32_t>& scratch) {
+  StepGradient g;
+  if (blocks.empty()) return g;
+  const std::size_t P = blocks[0].parameters.size();
+  std::vector<double> params(P, 0.0), lat;
+  double sse = 0;
+  std::int64_t values = 0;
+  for (const BlockGradient& b : blocks) {
+    BTF_CHECK(b.parameters.size() == P && b.latents.size() == b.texels.size() * std::size_t(latent));
+    for (std::size_t k = 0; k < P; ++k) params[k] += b.parameters[k];
+    sse += b.squared_error;
+    values += b.values;
+    for (std::size_t i = 0; i < b.texels.size(); ++i) {
+      const std::int32_t t = b.texels[i];
+      BTF_CHECK(t >= 0 && std::size_t(t) < scratch.size());
+      if (scratch[t] < 0) {
+        scratch[t] = std::int32_t(g.texels.size());
+        g.texels.push_back(t);
+        lat.resize(lat.size() + latent, 0.0);
+      }
+      double* acc = lat.data() + std::size_t(scratch[t]) * latent;
+      for (int k = 0; k < latent; ++k) acc[k] += b.latents[i * latent + k];
+    }
+  }
+  for (const std::int32_t t : g.texels) scratch[t] = -1;
+  BTF_CHECK(values > 0);
+  // The mean over the batch's values: its gradient is the sums' divided by their count.
+  const double inv = 1.0 / double(values);
+  g.values = values;
+  g.loss = sse * inv;
+  g.parameters.resize(P);
+  for (std::size_t k = 0; k < P; ++k) g.parameters[k] = float(params[k] * inv);
+  g.latents.resize(lat.size());
+  for (std::size_t k = 0; k < lat.size(); ++k) g.latents[k] = float(lat[k] * inv);
+  return g;
+}
+
+NeuralTrainer::NeuralTrainer(const NeuralSamples& samples, const NeuralTrainOptions& options)
+    : samples_(samples), o_(options) {
+  o_.Check();
+  samples_.Check();
+  const std::int64_t n = samples_.size();
+  steps_ = o_.steps > 0 ? o_.steps : std::int64_t(std::ceil(o_.epochs * double(n) / o_.batch));
+  steps_ = std::max<std::int64_t>(steps_, 1);
+  model_.encoding = o_.encoding;
+  model_.latent = o_.latent;
+  model_.net = NeuralNet(NeuralNetShape{o_.latent + o_.encoding.Width(), o_.hidden, samples_.channels, o_.activation},
+                         o_.seed);
+  model_.latents.resize(o_.latent, samples_.texels);
+  SplitMix64 rng{Mix(o_.seed, 0x6c6174)};
+  for (Eigen::Index i = 0; i < model_.latents.size(); ++i)
+    model_.latents.data()[i] = float(o_.latent_init * (2 * rng.Uniform() - 1));
+  adam_ = Adam(model_.net.parameter_count(), o_.adam);
+  latent_adam_ = LazyAdam(samples_.texels, o_.latent, o_.adam);
+  slot_scratch_.assign(std::size_t(samples_.texels), -1);
+}
+
+int NeuralTrainer::blocks_per_step() const { return (o_.batch + o_.block - 1) / o_.block; }
+
+void NeuralTrainer::EnsurePermutation(std::int64_t epoch) const {
+  if (epoch == perm_epoch_) return;
+  const std::int64_t n = samples_.size();
+  perm_.resize(n);
+  for (std::int64_t i = 0; i < n; ++i) perm_[i] = i;
+  SplitMix64 rng{Mix(o_.seed, 0x7065726d00000000ull + std::uint64_t(epoch))};
+  for (std::int64_t i = n - 1; i > 0; --i) std::swap(perm_[i], perm_[rng.Below(std::uint64_t(i) + 1)]);
+  perm_epoch_ = epoch;
+}
+
+void NeuralTrainer::StepSamples(std::int64_t s, std::vector<std::int64_t>* indices) const {
+  const std::int64_t n = samples_.size();
+  indices->resize(o_.batch);
+  for (int j = 0; j < o_.batch; ++j) {
+    const std::int64_t p = s * o_.batch + j;
+    EnsurePermutation(p / n);
+    (*indices)[j] = perm_[p % n];
+  }
+}
+
+double NeuralTrainer::LearningRate(std::int64_t s, double initial) const {
+  const double t = steps_ > 1 ? double(s) / double(steps_ - 1) : 1.0;
+  const double low = initial * o_.final_learning_rate;
+  return low + 0.5 * (initial - low) * (1 + std::cos(std::numbers::pi * std::min(t, 1.0)));
+}
+
+// Samples ahead whose data the gather loop asks the cache for.
+constexpr int kFetchAhead = 16;
+
+void NeuralTrainer::ComputeBlockGradients(int first, int count, std::vector<BlockGradient>* out) const {
+  BTF_CHECK(first >= 0 && count >= 0 && first + count <= blocks_per_step());
+  StepSamples(step_, &batch_);
+  out->resize(count);
+  const int L = o_.latent, E = o_.encoding.Width(), C = samples_.channels;
+  const NeuralNet& net = model_.net;
+  // OpenMP over blocks only: inside a parallel region Eigen runs its products on the calling
+  // thread, and each block's arithmetic is the same whichever thread computes it, so the blocks
+  // are handed out dynamically (a thread the OS holds back does not hold up the others).
+#pragma omp parallel
+  {
+    NeuralNet::Workspace ws;
+    Eigen::MatrixXf X, dY, dX;
+#pragma omp for schedule(dynamic, 1)
+    for (int k = 0; k < count; ++k) {
+      const int begin = (first + k) * o_.block, nb = std::min(o_.block, o_.batch - begin);
+      BlockGradient& g = (*out)[k];
+      g.Clear();
+      g.texels.resize(nb);
+      X.resize(L + E, nb);
+      for (int j = 0; j < nb; ++j) {
+        // The batch visits samples (and their texels' latents) in random order: fetch ahead.
+        if (j + kFetchAhead < nb) {
+          const std::int64_t p = batch_[begin + j + kFetchAhead];
+          __builtin_prefetch(&samples_.texel[p]);
+          __builtin_prefetch(&samples_.wi[3 * p]);
+          __builtin_prefetch(&samples_.wo[3 * p]);
+          __builtin_prefetch(&samples_.target[std::size_t(p) * C]);
+        }
+        if (j + kFetchAhead / 2 < nb)
+          __builtin_prefetch(model_.latents.col(samples_.texel[batch_[begin + j + kFetchAhead / 2]]).data());
+        const std::int64_t i = batch_[begin + j];
+        g.texels[j] = samples_.texel[i];
+        X.col(j).head(L) = model_.latents.col(g.texels[j]);
+        EncodeDirections(o_.encoding, &samples_.wi[3 * i], &samples_.wo[3 * i], X.col(j).data() + L);
+      }
+      const Eigen::MatrixXf& Y = net.Forward(X, ws);
+      dY.resize(C, nb);
+      double sse = 0;
+      for (int j = 0; j < nb; ++j) {
+        const float* t = &samples_.target[std::size_t(batch_[begin + j]) * C];
+        for (int c = 0; c < C; ++c) {
+          const float r = Y(c, j) - t[c];
+          sse += double(r) * r;
+          dY(c, j) = 2 * r;  // d(r^2)/dy
+        }
+      }
+      g.squared_error = sse;
+      g.values = std::int64_t(nb) * C;
+      g.parameters.assign(std::size_t(net.parameter_count()), 0.f);
+      net.Backward(X, dY, ws, g.parameters.data(), &dX);
+      g.latents.resize(std::size_t(nb) * L);
+      for (int j = 0; j < nb; ++j)
+        for (int l = 0; l < L; ++l) g.latents[std::size_t(j) * L + l] = dX(l, j);
+    }
+  }
+}
+
+double NeuralTrainer::ApplyStep(std::span<const BlockGradient> blocks) {
+  BTF_CHECK(int(blocks.size()) == blocks_per_step() && step_ < steps_);
+  const StepGradient g = ReduceInOrder(blocks, o_.latent, slot_scratch_);
+  bool finite = std::isfinite(g.loss);
+  for (const float v : g.parameters) finite = finite && std::isfinite(v);
+  for (const float v : g.latents) finite = finite && std::isfinite(v);
+  if (!finite)
+    ThrowBadInput("neural training diverged at step {} (loss {}): lower the learning rates ({}, latents {})", step_,
+                  g.loss, o_.learning_rate, o_.latent_learning_rate);
+  adam_.Step(model_.net.parameters().data(), g.parameters.data(), LearningRate(step_, o_.learning_rate));
+  const double lr = LearningRate(step_, o_.latent_learning_rate);
+  for (std::size_t i = 0; i < g.texels.size(); ++i)
+    latent_adam_.StepRow(g.texels[i], model_.latents.col(g.texels[i]).data(), &g.latents[i * o_.latent], lr);
+  ++step_;
+  return g.loss;
+}
+
+double NeuralTrainer::Step() {
+  std::vector<BlockGradient> blocks;
+  ComputeBlockGradients(0, blocks_per_step(), &blocks);
+  return ApplyStep(blocks);
+}
+
+NeuralModel TrainNeural(const NeuralSamples& samples, const NeuralTrainOptions& options, const NeuralProgress& progress,
+                        NeuralTrainSummary* summary) {
+  NeuralTrainer trainer(samples, options);
+  NeuralTrainSummary s;
+  s.steps = trainer.steps();
+  std::vector<BlockGradient> blocks;
+  for (std::int64_t k = 0; k < trainer.steps(); ++k) {
+    trainer.ComputeBlockGradients(0, trainer.blocks_per_step(), &blocks);
+    const double loss = trainer.ApplyStep(blocks);
+    if (k == 0) s.first_loss = loss;
+    s.last_loss = loss;
+    if (progress && !progress(k + 1, trainer.steps(), loss)) throw Cancelled();
+  }
+  if (summary) *summary = s;
+  return std::move(trainer.model());
+}
+
+}  // namespace btf
