@@ -16,14 +16,10 @@ find_package(PkgConfig REQUIRED)
 pkg_check_modules(LIBZIP REQUIRED IMPORTED_TARGET libzip)
 # libdeflate (Debian: libdeflate-dev) inflates dataset chunks on the compute threads (libbtf/io/raw_chunks.h).
 pkg_check_modules(LIBDEFLATE REQUIRED IMPORTED_TARGET libdeflate)
+# HDF5 (C library; libbtf::io links hdf5::hdf5 publicly). The installed package config recreates
+# this target from its properties (cmake/BtfPackage.cmake) rather than running FindHDF5 again.
 set(HDF5_PREFER_PARALLEL OFF)
 find_package(HDF5 REQUIRED COMPONENTS C)
-if(NOT TARGET btf_hdf5)
-  add_library(btf_hdf5 INTERFACE)
-  target_include_directories(btf_hdf5 SYSTEM INTERFACE ${HDF5_INCLUDE_DIRS})
-  target_link_libraries(btf_hdf5 INTERFACE ${HDF5_C_LIBRARIES})
-  target_compile_definitions(btf_hdf5 INTERFACE ${HDF5_DEFINITIONS})
-endif()
 # MPI (Open MPI from Debian: libopenmpi-dev, openmpi-bin) for distributed runs (docs/scaling.md);
 # optional: without it every tool runs as one process.
 option(BTF_WITH_MPI "Distributed runs over MPI when MPI is found" ON)

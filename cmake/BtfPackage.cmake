@@ -18,6 +18,22 @@ install(EXPORT libbtf-static-targets NAMESPACE libbtf:: DESTINATION ${BTF_CMAKE_
 if(BTF_SHARED_LIBS)
   install(EXPORT libbtf-shared-targets NAMESPACE libbtf:: DESTINATION ${BTF_CMAKE_DIR})
 endif()
+# hdf5::hdf5 as found for this build, for libbtfConfig.cmake to recreate: FindHDF5 try-compiles C,
+# which fails in a consumer whose project() enables only CXX.
+set(BTF_HDF5_LOCATION "")
+foreach(property IMPORTED_LOCATION IMPORTED_LOCATION_RELEASE IMPORTED_LOCATION_RELWITHDEBINFO)
+  get_target_property(location hdf5::hdf5 ${property})
+  if(location AND NOT BTF_HDF5_LOCATION)
+    set(BTF_HDF5_LOCATION ${location})
+  endif()
+endforeach()
+foreach(property INCLUDE_DIRECTORIES COMPILE_DEFINITIONS LINK_LIBRARIES)
+  get_target_property(value hdf5::hdf5 INTERFACE_${property})
+  set(BTF_HDF5_${property} "")
+  if(value)
+    set(BTF_HDF5_${property} "${value}")
+  endif()
+endforeach()
 configure_package_config_file(${PROJECT_SOURCE_DIR}/cmake/libbtfConfig.cmake.in
                               ${PROJECT_BINARY_DIR}/libbtfConfig.cmake INSTALL_DESTINATION ${BTF_CMAKE_DIR})
 # 0.x: a minor release may change the API, so only the same major.minor is compatible.

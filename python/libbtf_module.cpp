@@ -12,6 +12,9 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <tuple>
+#include <type_traits>
+#include <utility>
 
 #include "libbtf/compress/codec.h"
 #include "libbtf/compress/compress.h"
@@ -20,8 +23,6 @@
 #include "libbtf/core/error.h"
 #include "libbtf/core/version.h"
 #include "libbtf/eval/metrics.h"
-#include "libbtf/io/bonn.h"
-#include "libbtf/io/file_kind.h"
 #include "libbtf/io/hdf5.h"
 
 namespace py = pybind11;
@@ -46,44 +47,16 @@ const char* Category(btf::ExitCode code) {
   return "internal";
 }
 
-// A codec file as a SlotSource that also keeps the Codec for the decoders Value and DecodeAbrdf
-// (OpenCodecSource hides it).
-class CodecFile final : public btf::SlotSource {
- public:
-  explicit CodecFile(const std::filesystem::path& path) : codec_(btf::ReadCodec(path)), name_(path.string()) {}
-  const btf::Codec& codec() const { return codec_; }
-  const std::string& name() const override { return name_; }
-  std::string kind() const override { return btf::kCodecFormat; }
-  const btf::Sampling& views() const override { return codec_.views(); }
-  const btf::Sampling& lights() const override { return codec_.lights(); }
-  int height() const override { return codec_.height(); }
-  int width() const override { return codec_.width(); }
-  int channels() const override { return codec_.channels(); }
-  btf::DatasetInfo info() const override { return codec_.info(); }
-  void ReadViewSlot(int view, float* out) const override { codec_.DecodeViewSlot(view, out); }
-  void ReadImage(int view, int light, float* out) const override { codec_.DecodeImage(view, light, out); }
-
- private:
-  btf::Codec codec_;
-  std::string name_;
-};
-
 // libbtf.Source: one open file.
 class Source {
  public:
-  explicit Source(const std::filesystem::path& path) : path_(path) {
-    format_ = btf::FileFormatOf(path);
-    if (format_ == btf::kCodecFormat) {
-      auto codec = std::make_unique<CodecFile>(path);
-      codec_ = &codec->codec();
-      source_ = std::move(codec);
-    } else {
-      source_ = btf::OpenSource(path);  // dataset or Bonn file; refuses other formats naming the file
-    }
-  }
+  // Any libbtf file, as btf-info and btf-eval compare open it; other formats are refused naming the file.
+  explicit Source(const std::filesystem::path& path)
+      : path_(path), source_(btf::OpenSource(path)), format_(source_->kind()),
+        codec_(dynamic_cast<const btf::CodecSource*>(source_.get())) {}
 
   const btf::SlotSource& source() const { return *source_; }
-  const btf::Codec* codec() const { return codec_; }
+  const btf::Codec* codec() const { return codec_ ? &codec_->codec() : nullptr; }
   const std::filesystem::path& path() const { return path_; }
   const std::string& format() const { return format_; }
   bool is_codec() const { return codec_ != nullptr; }
@@ -138,7 +111,7 @@ class Source {
     F32Array out({s.views().size(), s.lights().size(), s.channels()});
     float* o = out.mutable_data();
     if (codec_) {
-      const std::vector<float> a = codec_->DecodeAbrdf(y, x);
+      const std::vector<float> a = codec_->codec().DecodeAbrdf(y, x);
       std::copy(a.begin(), a.end(), o);
       return out;
     }
@@ -172,28 +145,23 @@ class Source {
     for (const auto& [rows, name] : {std::pair{nu, "uv"}, std::pair{ni, "wi"}, std::pair{no, "wo"}})
       if (rows != n && rows != 1)
         btf::ThrowUsage("decode: '{}' has {} rows but another argument has {}; give N rows (or one) each", name, rows, n);
-    F32Array out({n, py::ssize_t(codec_->channels())});
+    const btf::Codec& codec = codec_->codec();
+    F32Array out({n, py::ssize_t(codec.channels())});
     const double *pu = uv.data(), *pi = wi.data(), *po = wo.data();
     const bool su = nu > 1, si = ni > 1, so = no > 1;
     for (py::ssize_t k = 0; k < n; ++k) {
       const double* u = pu + (su ? 2 * k : 0);
       const double* i = pi + (si ? 3 * k : 0);
       const double* o = po + (so ? 3 * k : 0);
-      codec_->Value(btf::Vec2(u[0], u[1]), btf::Vec3(i[0], i[1], i[2]), btf::Vec3(o[0], o[1], o[2]),
-                    out.mutable_data() + k * codec_->channels(), f);
+      codec.Value(btf::Vec2(u[0], u[1]), btf::Vec3(i[0], i[1], i[2]), btf::Vec3(o[0], o[1], o[2]),
+                  out.mutable_data() + k * codec.channels(), f);
     }
     return out;
   }
 
-  // btf-info's summary (without the value scan unless stats).
+  // btf-info's summary (without the value scan unless stats); an open codec is not read again.
   py::object describe(bool stats) const {
-    if (codec_) {
-      nlohmann::json j = codec_->Describe();
-      j["path"] = path_.string();
-      return ToPython(j);
-    }
-    if (btf::IsBonnFormat(format_)) return ToPython(btf::DescribeBonnFile(path_, stats));
-    return ToPython(btf::DescribeDatasetFile(path_, stats));
+    return ToPython(codec_ ? codec_->Describe() : btf::DescribeFile(path_, stats));
   }
 
  private:
@@ -209,9 +177,9 @@ class Source {
   }
 
   std::filesystem::path path_;
-  std::string format_;
   std::unique_ptr<btf::SlotSource> source_;
-  const btf::Codec* codec_ = nullptr;  // owned by source_ when the file is a codec
+  std::string format_;
+  const btf::CodecSource* codec_;  // source_ when the file is a codec, else nullptr
 };
 
 // A codec's stored coefficients as read-only NumPy arrays over the Codec's own memory (no copy);
@@ -304,41 +272,73 @@ struct PyReporter {
   }
 };
 
-// The tools' input choice for compression: a Bonn .btf file or a dataset file.
-std::unique_ptr<btf::SlotSource> OpenCompressInput(const std::filesystem::path& path) {
-  return btf::OpenCompressInput(path);
+// libbtf.compress's keywords: btf-compress's options by their names with dashes as underscores
+// (docs/python.md), each read from CompressOptions for its default and written into it from the
+// call, in the order of the signature. Applied in that order: method and storage are parsed
+// (usage errors naming them) before the scene file is read.
+template <typename T, typename Get, typename Set>
+struct Keyword {
+  using Value = T;
+  const char* name;
+  Get get;  // T(const CompressOptions&)
+  Set set;  // void(CompressOptions&, const T&)
+};
+
+template <typename T, typename Get, typename Set>
+Keyword<T, Get, Set> Converted(const char* name, Get get, Set set) {
+  return {name, get, set};
 }
 
-py::object Compress(const std::filesystem::path& input, const std::filesystem::path& output, const std::string& method,
-                    int components, int clusters, double error, double energy, std::uint64_t bytes,
-                    const std::string& storage, int quant_bits, double tensor_growth, std::uint64_t seed, bool log,
-                    double log_epsilon, int max_iterations, double min_improvement, const std::string& lpca_memory,
-                    int lpca_sample, int lpca_splits, const std::string& lpca_matrix, const std::optional<std::filesystem::path>& scene, const std::optional<py::function>& progress) {
-  btf::CompressOptions o;
-  o.method = btf::ParseMethod(method);
-  o.components = components;
-  o.clusters = clusters;
-  o.target_error = error;
-  o.retained_energy = energy;
-  o.max_bytes = bytes;
-  o.storage = btf::ParseStorage(storage);
-  o.tensor.quant_bits = quant_bits;
-  o.tensor.growth = tensor_growth;
-  o.seed = seed;
-  o.log_transform = log;
-  o.log_epsilon = log_epsilon;
-  o.lpca.max_iterations = max_iterations;
-  o.lpca.min_improvement = min_improvement;
-  o.lpca.memory = lpca_memory;
-  o.lpca.sample = lpca_sample;
-  o.lpca.splits = lpca_splits;
-  o.lpca.matrix = lpca_matrix;
-  if (scene) o.scene = btf::SceneSpec::Load(*scene);
+// A keyword that is a field of CompressOptions as it is; `field` returns it (const or not).
+template <typename Field>
+auto Member(const char* name, Field field) {
+  using T = std::decay_t<decltype(field(std::declval<btf::CompressOptions&>()))>;
+  return Converted<T>(
+      name, [field](const btf::CompressOptions& o) -> T { return field(o); },
+      [field](btf::CompressOptions& o, const T& v) { field(o) = v; });
+}
+
+auto CompressKeywords() {
+  using btf::CompressOptions;
+  using Path = std::optional<std::filesystem::path>;
+  return std::make_tuple(
+      Converted<std::string>(
+          "method", [](const CompressOptions& o) { return btf::MethodName(o.method); },
+          [](CompressOptions& o, const std::string& v) { o.method = btf::ParseMethod(v); }),
+      Member("components", [](auto& o) -> auto& { return o.components; }),
+      Member("clusters", [](auto& o) -> auto& { return o.clusters; }),
+      Member("error", [](auto& o) -> auto& { return o.target_error; }),
+      Member("energy", [](auto& o) -> auto& { return o.retained_energy; }),
+      Member("bytes", [](auto& o) -> auto& { return o.max_bytes; }),
+      Converted<std::string>(
+          "storage", [](const CompressOptions& o) { return btf::StorageName(o.storage); },
+          [](CompressOptions& o, const std::string& v) { o.storage = btf::ParseStorage(v); }),
+      Member("quant_bits", [](auto& o) -> auto& { return o.tensor.quant_bits; }),
+      Member("tensor_growth", [](auto& o) -> auto& { return o.tensor.growth; }),
+      Member("seed", [](auto& o) -> auto& { return o.seed; }),
+      Member("log", [](auto& o) -> auto& { return o.log_transform; }),
+      Member("log_epsilon", [](auto& o) -> auto& { return o.log_epsilon; }),
+      Member("max_iterations", [](auto& o) -> auto& { return o.lpca.max_iterations; }),
+      Member("min_improvement", [](auto& o) -> auto& { return o.lpca.min_improvement; }),
+      Member("lpca_memory", [](auto& o) -> auto& { return o.lpca.memory; }),
+      Member("lpca_sample", [](auto& o) -> auto& { return o.lpca.sample; }),
+      Member("lpca_splits", [](auto& o) -> auto& { return o.lpca.splits; }),
+      Member("lpca_matrix", [](auto& o) -> auto& { return o.lpca.matrix; }),
+      // The path of a scene.json (SceneSpec::Load); a default CompressOptions has no scene: None.
+      Converted<Path>(
+          "scene", [](const CompressOptions&) { return Path(); },
+          [](CompressOptions& o, const Path& v) {
+            if (v) o.scene = btf::SceneSpec::Load(*v);
+          }));
+}
+
+// btf-compress INPUT -o OUTPUT with checked options.
+py::object RunCompress(const btf::CompressOptions& o, const std::filesystem::path& input,
+                       const std::filesystem::path& output, const std::optional<py::function>& progress) {
   o.Check();
   // As btf-compress: claim the output first, so an unwritable folder fails before the work.
-  btf::AtomicOutput target(output);
-  target.Reserve();
-  const auto source = OpenCompressInput(input);
+  btf::AtomicOutput target(output, btf::AtomicOutput::kReserve);
+  const auto source = btf::OpenCompressInput(input);
   PyReporter reporter(progress);
   btf::CompressSummary s;
   try {
@@ -350,6 +350,28 @@ py::object Compress(const std::filesystem::path& input, const std::filesystem::p
   nlohmann::json j = s.ToJson();
   j["output"] = output.string();
   return ToPython(j);
+}
+
+// Defines libbtf.compress(input, output, *, <keywords>, progress=None): one typed parameter per
+// keyword (pybind11 converts and type-checks each), defaults from a default CompressOptions.
+template <typename... K>
+void DefineCompress(py::module_& m, const std::tuple<K...>& keywords) {
+  const btf::CompressOptions defaults;
+  std::apply(
+      [&](const K&... k) {
+        m.def(
+            "compress",
+            [keywords](const std::filesystem::path& input, const std::filesystem::path& output,
+                       const typename K::Value&... values, const std::optional<py::function>& progress) {
+              btf::CompressOptions o;
+              std::apply([&](const K&... kw) { (kw.set(o, values), ...); }, keywords);
+              return RunCompress(o, input, output, progress);
+            },
+            py::arg("input"), py::arg("output"), py::kw_only(), (py::arg(k.name) = k.get(defaults))...,
+            py::arg("progress") = py::none(),
+            "btf-compress INPUT -o OUTPUT with the same options; returns its --json summary as a dict");
+      },
+      keywords);
 }
 
 py::object Compare(const py::object& reference, const py::object& test, double peak, double ssim_sigma, bool ssim,
@@ -397,17 +419,12 @@ PYBIND11_MODULE(libbtf, m) {
   py::register_exception_translator([](std::exception_ptr p) {
     try {
       if (p) std::rethrow_exception(p);
-    } catch (const btf::Error& e) {
-      btf::ExitCode code = e.code();
-      std::string message = e.what();
+    } catch (const btf::Error& thrown) {
       // As the tools' handler: a file read as damaged after a failed read system call is an I/O error.
-      if (code == btf::ExitCode::kBadInput && btf::h5::IoErrorSeen()) {
-        code = btf::ExitCode::kIo;
-        message += " (after an I/O error reading it: failing disk or network file system?)";
-      }
-      py::object exc = py::handle(error)(message);
-      exc.attr("exit_code") = static_cast<int>(code);
-      exc.attr("category") = Category(code);
+      const btf::Error e = btf::h5::ReportedError(thrown);
+      py::object exc = py::handle(error)(e.what());
+      exc.attr("exit_code") = static_cast<int>(e.code());
+      exc.attr("category") = Category(e.code());
       PyErr_SetObject(error.ptr(), exc.ptr());
     }
   });
@@ -442,17 +459,7 @@ PYBIND11_MODULE(libbtf, m) {
   m.def("open", [](const std::filesystem::path& path) { return Source(path); }, py::arg("path"),
         "Opens a libbtf dataset or codec file, or a Bonn .btf file");
 
-  const btf::CompressOptions co;
-  m.def("compress", &Compress, py::arg("input"), py::arg("output"), py::kw_only(),
-        py::arg("method") = btf::MethodName(co.method), py::arg("components") = co.components,
-        py::arg("clusters") = co.clusters, py::arg("error") = co.target_error, py::arg("energy") = co.retained_energy,
-        py::arg("bytes") = co.max_bytes, py::arg("storage") = btf::StorageName(co.storage),
-        py::arg("quant_bits") = co.tensor.quant_bits, py::arg("tensor_growth") = co.tensor.growth, py::arg("seed") = co.seed, py::arg("log") = co.log_transform, py::arg("log_epsilon") = co.log_epsilon,
-        py::arg("max_iterations") = co.lpca.max_iterations, py::arg("min_improvement") = co.lpca.min_improvement,
-        py::arg("lpca_memory") = co.lpca.memory, py::arg("lpca_sample") = co.lpca.sample,
-        py::arg("lpca_splits") = co.lpca.splits, py::arg("lpca_matrix") = co.lpca.matrix,
-        py::arg("scene") = py::none(), py::arg("progress") = py::none(),
-        "btf-compress INPUT -o OUTPUT with the same options; returns its --json summary as a dict");
+  DefineCompress(m, CompressKeywords());
 
   const btf::CompareOptions mo;
   m.def("compare", &Compare, py::arg("reference"), py::arg("test"), py::kw_only(), py::arg("peak") = mo.peak,

@@ -7,31 +7,14 @@
 
 namespace btf {
 
-namespace {
+nlohmann::json CodecSource::Describe() const {
+  nlohmann::json j = codec_.Describe();  // method, shape, samplings, components, sizes, transform
+  j["path"] = name_;
+  return j;
+}
 
-class CodecSlotSource final : public SlotSource {
- public:
-  CodecSlotSource(Codec codec, std::string name) : codec_(std::move(codec)), name_(std::move(name)) {}
-  const std::string& name() const override { return name_; }
-  std::string kind() const override { return kCodecFormat; }
-  const Sampling& views() const override { return codec_.views(); }
-  const Sampling& lights() const override { return codec_.lights(); }
-  int height() const override { return codec_.height(); }
-  int width() const override { return codec_.width(); }
-  int channels() const override { return codec_.channels(); }
-  DatasetInfo info() const override { return codec_.info(); }
-  void ReadViewSlot(int view, float* out) const override { codec_.DecodeViewSlot(view, out); }
-  void ReadImage(int view, int light, float* out) const override { codec_.DecodeImage(view, light, out); }
-
- private:
-  Codec codec_;
-  std::string name_;
-};
-
-}  // namespace
-
-std::unique_ptr<SlotSource> OpenCodecSource(const std::filesystem::path& path) {
-  return std::make_unique<CodecSlotSource>(ReadCodec(path), path.string());
+std::unique_ptr<CodecSource> OpenCodecSource(const std::filesystem::path& path) {
+  return std::make_unique<CodecSource>(ReadCodec(path), path.string());
 }
 
 std::unique_ptr<SlotSource> OpenSource(const std::filesystem::path& path, const DatasetReadOptions& read) {
@@ -44,6 +27,14 @@ std::unique_ptr<SlotSource> OpenSource(const std::filesystem::path& path, const 
 
 std::unique_ptr<SlotSource> OpenCompressInput(const std::filesystem::path& path, const DatasetReadOptions& read) {
   return IsBonnFile(path) ? OpenBonnSource(path) : OpenDatasetSource(path, read);
+}
+
+nlohmann::json DescribeFile(const std::filesystem::path& path, bool stats, const Reporter& reporter) {
+  const std::string format = FileFormatOf(path);
+  if (format == kDatasetFormat) return DescribeDatasetFile(path, stats, reporter);
+  if (format == kCodecFormat) return OpenCodecSource(path)->Describe();
+  if (IsBonnFormat(format)) return DescribeBonnFile(path, stats, reporter);
+  ThrowBadInput("'{}' holds format '{}', which this build of libbtf does not know", path.string(), format);
 }
 
 }  // namespace btf

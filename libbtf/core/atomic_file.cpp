@@ -110,6 +110,10 @@ AtomicOutput::AtomicOutput(std::filesystem::path final_path) : final_(std::move(
   slot_ = Register(temp_.string(), false);
 }
 
+AtomicOutput::AtomicOutput(std::filesystem::path final_path, ReserveNow) : AtomicOutput(std::move(final_path)) {
+  Reserve();  // the object is constructed: a throw here still runs the destructor
+}
+
 AtomicOutput::~AtomicOutput() {
   if (!committed_) {
     std::error_code ec;

@@ -12,6 +12,10 @@ namespace btf {
 class AtomicOutput {
  public:
   explicit AtomicOutput(std::filesystem::path final_path);
+  // Constructs and Reserve()s at once: an output claimed before long work, so that an unwritable
+  // folder fails now, not after it (`AtomicOutput out(path, AtomicOutput::kReserve)`).
+  enum ReserveNow { kReserve };
+  AtomicOutput(std::filesystem::path final_path, ReserveNow);
   ~AtomicOutput();  // removes the temporary unless Commit() succeeded
   AtomicOutput(const AtomicOutput&) = delete;
   AtomicOutput& operator=(const AtomicOutput&) = delete;

@@ -67,6 +67,12 @@ void SilenceErrors() {
 
 bool IoErrorSeen() { return g_io_error_seen.load(); }
 
+Error ReportedError(const Error& e) {
+  if (e.code() == ExitCode::kBadInput && IoErrorSeen())
+    return Error(ExitCode::kIo, fmt::format("{} (after an I/O error reading it: failing disk or network file system?)", e.what()));
+  return Error(e.code(), e.what());
+}
+
 void Handle::reset() {
   if (id_ < 0) return;
   herr_t r = 0;

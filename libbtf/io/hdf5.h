@@ -8,6 +8,8 @@
 #include <string>
 #include <vector>
 
+#include "libbtf/core/error.h"
+
 namespace btf::h5 {
 
 // Owns one hid_t and closes it with the matching H5xclose.
@@ -139,9 +141,12 @@ hid_t HalfType();
 // failed system calls for IoErrorSeen().
 void SilenceErrors();
 // True once an HDF5 call in this process failed because a read or write system call failed. A
-// "corrupt file" conclusion drawn after that is unreliable: the top-level handler of every tool
-// reports it as an I/O error (exit 4; tools/common/cli.cpp).
+// "corrupt file" conclusion drawn after that is unreliable (ReportedError).
 bool IoErrorSeen();
+// The error to report for `e` (the tools' top-level handler, libbtf.Error): a file read as
+// damaged (bad input) after IoErrorSeen() is a failing disk, not bad data, so it becomes an I/O
+// error (exit 4) whose message says so; any other error is returned unchanged.
+Error ReportedError(const Error& e);
 // Throws btf::Error for a failed read of `what` (e.g. "dataset 'x'") in `path`: I/O when the
 // read system call failed, bad input (truncated or corrupt file) otherwise.
 [[noreturn]] void ThrowUnreadable(const std::string& path, const std::string& what);

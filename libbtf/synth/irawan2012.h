@@ -31,7 +31,9 @@ namespace irawan2012 {
 double SpineRadius(double u, double umax, double kappa, double w, double l);
 
 // von Mises density on the circle, vM(c; b) = e^{b c} / (2 pi I0(|b|)), evaluated in scaled form
-// (no overflow for large |b|).
+// (no overflow for large |b|). VonMisesNorm(b) = 1 / (2 pi e^{-|b|} I0(|b|)) is the cached part
+// (irawan2012.cpp and irawan2012_nspec.cpp both cache it).
+double VonMisesNorm(double b);
 double VonMises(double cos_x, double b);
 // 1 / (2 pi e^{-|b|} I0(|b|)): the part of VonMises that depends on b alone (cached per kernel).
 double VonMisesNorm(double b);

@@ -44,6 +44,23 @@ TEST(AtomicOutput, ReserveCreatesTheTemporaryUntilCommitOrAbandon) {
   EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir), {}), 1);
 }
 
+TEST(AtomicOutput, ReserveNowClaimsTheOutputAtConstruction) {
+  const auto dir = test::TempDir();
+  {
+    AtomicOutput out(dir / "c.h5", AtomicOutput::kReserve);
+    EXPECT_TRUE(std::filesystem::exists(out.temp_path()));
+  }
+  EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir), {}), 0);
+  // A folder that exists but takes no new file (even for root): the claim fails at once, as I/O.
+  try {
+    AtomicOutput out("/proc/libbtf-claim.h5", AtomicOutput::kReserve);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ExitCode::kIo);
+    EXPECT_NE(std::string(e.what()).find("cannot create"), std::string::npos) << e.what();
+  }
+}
+
 TEST(AtomicOutput, MissingFolderIsAnIoError) {
   try {
     AtomicOutput out(test::TempDir() / "no" / "such" / "f.h5");

@@ -6,8 +6,9 @@
 #   2. PARTS, a comma-separated list of
 #        shared     tests/install/consumer, an external CMake project, configured with
 #                   find_package(libbtf) against PREFIX, built and run (shared libraries; it
-#                   must neither look for nor link libbtf's private dependencies); a missing
-#                   input must give it btf::Error's message and exit code 4;
+#                   must neither look for nor link libbtf's private dependencies); its project()
+#                   enables only CXX, and configuring it must not enable C; a missing input must
+#                   give it btf::Error's message and exit code 4;
 #        static     the same with LIBBTF_USE_STATIC_LIBS=ON (static archives);
 #        pkgconfig  the same main.cpp built with the flags of `pkg-config libbtf` alone;
 #        python     the Python module imported from PREFIX (not the build tree) reads the dataset;
@@ -60,6 +61,9 @@ for kind in shared static; do
     { cat "$work/cmake-$kind.log" >&2; fail "find_package(libbtf) consumer ($kind) did not configure"; }
   grep -q "libbtf $version ($kind) from $prefix/lib/cmake/libbtf" "$work/cmake-$kind.log" ||
     fail "consumer ($kind) did not find libbtf $version in $prefix: $(grep libbtf "$work/cmake-$kind.log")"
+  # project(... CXX): neither the consumer nor libbtf's package (HDF5 included) enabled C.
+  ! grep '^CMAKE_C_COMPILER:' "$work/cmake-$kind/CMakeCache.txt" ||
+    fail "find_package(libbtf) consumer ($kind) enabled the C language"
   cmake --build "$work/cmake-$kind" >"$work/build-$kind.log" 2>&1 ||
     { cat "$work/build-$kind.log" >&2; fail "find_package(libbtf) consumer ($kind) did not build"; }
   if [ $kind = shared ]; then

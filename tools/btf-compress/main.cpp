@@ -42,10 +42,7 @@ int RunCompress(const CLI::App& app, const btf::cli::CommonFlags& common, Compre
     btf::cli::RequireSingleRank("btf-compress --method " + f.method);
   // Claim the output before the work: an unwritable folder fails now, not after the compression.
   std::optional<btf::AtomicOutput> target;
-  if (btf::cli::PrintingRank()) {
-    target.emplace(f.output);
-    target->Reserve();
-  }
+  if (btf::cli::PrintingRank()) target.emplace(f.output, btf::AtomicOutput::kReserve);
   // A dataset file or a Bonn .btf file (decoded one view slot at a time).
   const auto input = btf::OpenCompressInput(f.dataset, btf::cli::DatasetReadOptionsFromEnvironment());
   const btf::CompressSummary s = btf::CompressToFile(f.options, *input, target ? &*target : nullptr, "btf-compress",

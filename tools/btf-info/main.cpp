@@ -1,10 +1,7 @@
 // btf-info FILE: summary of a libbtf dataset or codec file, or a Bonn .btf file (docs/btf-info.md).
 #include <fmt/format.h>
 
-#include "libbtf/compress/codec.h"
-#include "libbtf/io/bonn.h"
-#include "libbtf/io/dataset_stats.h"
-#include "libbtf/io/file_kind.h"
+#include "libbtf/compress/codec_source.h"
 #include "tools/common/cli.h"
 
 namespace {
@@ -35,18 +32,7 @@ int main(int argc, char** argv) {
   btf::cli::AddCommonFlags(app, common);
   return btf::cli::Main(argc, argv, app, [&] {
     const btf::Reporter reporter = btf::cli::MakeReporter(common);
-    const std::string format = btf::FileFormatOf(path);
-    nlohmann::json j;
-    if (format == btf::kDatasetFormat)
-      j = btf::DescribeDatasetFile(path, !no_stats, reporter);
-    else if (format == btf::kCodecFormat) {
-      j = btf::ReadCodec(path).Describe();  // method, shape, samplings, components, sizes, transform
-      j["path"] = path;
-    } else if (btf::IsBonnFormat(format))
-      j = btf::DescribeBonnFile(path, !no_stats, reporter);
-    else
-      throw btf::Error(btf::ExitCode::kBadInput,
-                       fmt::format("'{}' holds format '{}', which this build of libbtf does not know", path, format));
+    const nlohmann::json j = btf::DescribeFile(path, !no_stats, reporter);
     if (common.json)
       btf::cli::PrintJson(app, j);
     else

@@ -247,13 +247,9 @@ int RunTool(int argc, char** argv, CLI::App& app, const std::function<int()>& ru
     }
     CheckDistributable(app);
     return run();
-  } catch (const Error& e) {
+  } catch (const Error& thrown) {
     // A file read as damaged after a failed read system call is a failing disk, not bad data.
-    if (e.code() == ExitCode::kBadInput && h5::IoErrorSeen()) {
-      PrintError(app, "error", fmt::format("{} (after an I/O error reading it: failing disk or network file system?)",
-                                           e.what()));
-      return static_cast<int>(ExitCode::kIo);
-    }
+    const Error e = h5::ReportedError(thrown);
     // A usage error is the same on every rank: rank 0 alone prints it.
     if (e.code() != ExitCode::kUsage || PrintingRank())
       PrintError(app, e.code() == ExitCode::kInternal ? "internal error" : "error",
