@@ -2,11 +2,13 @@
 
 #include <dirent.h>
 #include <fcntl.h>
+#include <sys/stat.h>
 #include <sys/syscall.h>
 #include <unistd.h>
 
 #include <cerrno>
 
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <csignal>
@@ -100,9 +102,45 @@ std::filesystem::path TemporaryName(const std::filesystem::path& final_path) {
                            final_path.extension().string());
 }
 
+// What sits at `path` (not following a final symbolic link), in words, when it is something an
+// output must not replace: a folder, device, named pipe or socket; empty otherwise.
+std::string UnreplaceableKind(const std::filesystem::path& path) {
+  struct stat st {};
+  if (::lstat(path.c_str(), &st) != 0 || S_ISREG(st.st_mode) || S_ISLNK(st.st_mode)) return {};
+  if (S_ISDIR(st.st_mode)) return "a folder";
+  if (S_ISCHR(st.st_mode) || S_ISBLK(st.st_mode)) return "a device";
+  if (S_ISFIFO(st.st_mode)) return "a named pipe";
+  return S_ISSOCK(st.st_mode) ? "a socket" : "not a regular file";
+}
+
 }  // namespace
 
+void RefuseOutputOverInputs(const std::filesystem::path& output, const std::vector<std::filesystem::path>& inputs) {
+  namespace fs = std::filesystem;
+  struct stat out {};
+  if (output.empty() || ::stat(output.c_str(), &out) != 0) return;  // a new output destroys nothing
+  std::error_code ec;
+  const fs::path folder = S_ISDIR(out.st_mode) ? fs::weakly_canonical(output, ec) : fs::path();
+  for (const fs::path& input : inputs) {
+    struct stat in {};
+    if (input.empty() || ::stat(input.c_str(), &in) != 0) continue;
+    if (in.st_dev == out.st_dev && in.st_ino == out.st_ino)
+      ThrowUsage("output '{}' is the input '{}' (the same file): writing it would destroy the input; choose another "
+                 "output name",
+                 output.string(), input.string());
+    if (folder.empty()) continue;
+    const fs::path canonical = fs::weakly_canonical(input, ec);
+    const auto [end, rest] = std::mismatch(folder.begin(), folder.end(), canonical.begin(), canonical.end());
+    if (end == folder.end())
+      ThrowUsage("output folder '{}' holds the input '{}': the folder is replaced as a whole, which would destroy "
+                 "the input; choose another output folder",
+                 output.string(), input.string());
+  }
+}
+
 AtomicOutput::AtomicOutput(std::filesystem::path final_path) : final_(std::move(final_path)) {
+  if (const std::string kind = UnreplaceableKind(final_); !kind.empty())
+    ThrowUsage("output '{}' is {}: only a regular file is replaced; choose a file name", final_.string(), kind);
   const auto dir = final_.has_parent_path() ? final_.parent_path() : std::filesystem::path(".");
   if (!std::filesystem::is_directory(dir))
     ThrowIo("output folder '{}' does not exist: create it first", dir.string());

@@ -11,6 +11,8 @@ namespace btf {
 
 class AtomicOutput {
  public:
+  // Only a regular file, a symbolic link (the link itself is replaced) or nothing may sit at
+  // final_path: a folder, device, named pipe or socket there is refused (btf::Error, usage).
   explicit AtomicOutput(std::filesystem::path final_path);
   // Constructs and Reserve()s at once: an output claimed before long work, so that an unwritable
   // folder fails now, not after it (`AtomicOutput out(path, AtomicOutput::kReserve)`).
@@ -64,6 +66,12 @@ class AtomicDirectory {
   int slot_ = -1;
   bool committed_ = false;
 };
+
+// Refuses (btf::Error, usage; exit 2) before any work an output that would destroy an input: an
+// output file that is the same file as an input (device and inode, so links and other spellings
+// of the path count), or an output folder (replaced as a whole) that holds an input. Outputs and
+// inputs that do not exist yet are fine.
+void RefuseOutputOverInputs(const std::filesystem::path& output, const std::vector<std::filesystem::path>& inputs);
 
 // Writes `size` bytes to `path` atomically (checked POSIX writes, fsync, rename).
 void WriteFileAtomic(const std::filesystem::path& path, const void* data, std::size_t size);

@@ -497,6 +497,18 @@ void WriteCameraFile(const std::filesystem::path& path, const CameraFile& f, con
   WriteJsonAtomic(path, j);
 }
 
+std::vector<std::filesystem::path> ManifestFiles(const Manifest& manifest, const std::filesystem::path& manifest_path) {
+  const std::filesystem::path dir = manifest_path.parent_path();
+  std::vector<std::filesystem::path> files;
+  for (const std::string* f : {&manifest.board_file, &manifest.dark_frame, &manifest.flat_field})
+    if (!f->empty()) files.push_back(dir / *f);
+  for (const PhotoEntry& p : manifest.photos) {
+    files.push_back(dir / p.file);
+    for (const BracketExposure& b : p.brackets) files.push_back(dir / b.file);
+  }
+  return files;
+}
+
 Manifest ReadManifest(const std::filesystem::path& path) {
   const json j = LoadJson(path);
   const Node root(&path, &j, "");

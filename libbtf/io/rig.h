@@ -160,6 +160,9 @@ struct PhotoTruth {
 Board ReadBoard(const std::filesystem::path& path);
 void WriteBoard(const std::filesystem::path& path, const Board& board);
 Manifest ReadManifest(const std::filesystem::path& path);
+// Every file a manifest names (board, dark frame, flat field, photos and their brackets), resolved
+// against the manifest's folder: the inputs a registration reads.
+std::vector<std::filesystem::path> ManifestFiles(const Manifest& manifest, const std::filesystem::path& manifest_path);
 void WriteManifest(const std::filesystem::path& path, const Manifest& manifest);
 std::vector<PhotoTruth> ReadTruth(const std::filesystem::path& path);
 void WriteTruth(const std::filesystem::path& path, const std::vector<PhotoTruth>& truth);

@@ -83,7 +83,7 @@ TEST(RegisterCli, RegistersSynthPhotosAgainstTruth) {
   EXPECT_LT(RelRms(gt, reg), 0.06);
 }
 
-TEST(RegisterCli, AFailingPhotoIsReportedAndTheRestStillWritten) {
+TEST(RegisterCli, AFailingPhotoIsReportedAndKeepsTheOldOutput) {
   const auto& ph = PhotoSet();
   const auto dir = test::TempDir();
   for (const auto& f : std::filesystem::directory_iterator(ph)) std::filesystem::copy(f.path(), dir / f.path().filename());
@@ -92,6 +92,10 @@ TEST(RegisterCli, AFailingPhotoIsReportedAndTheRestStillWritten) {
     std::ofstream bad(dir / "v000_l030.png");  // unreadable photo
     bad << "not a png";
   }
+  {
+    std::ofstream old(dir / "a.h5");  // an earlier output under -o: a failed run must keep it
+    old << "earlier output";
+  }
   std::string out;
   const std::string base = test::Tool("btf-register") + " run --quiet --json " + (dir / "manifest.json").string() +
                            " --resolution 16 --report " + (dir / "r.json").string() + " -o ";
@@ -99,18 +103,19 @@ TEST(RegisterCli, AFailingPhotoIsReportedAndTheRestStillWritten) {
   json j = json::parse(out);
   EXPECT_EQ(j["photos_ok"], 2);
   EXPECT_EQ(j["photos_failed"], 2);
-  EXPECT_TRUE(std::filesystem::exists(dir / "a.h5"));  // the others are kept
-  const json rep = ReadJson(dir / "r.json");
+  EXPECT_EQ(test::Slurp(dir / "a.h5"), "earlier output");  // kept byte for byte
+  const json rep = ReadJson(dir / "r.json");  // the report is written: it lists the failures
   for (const auto& p : rep["photos"])
     if (p["file"] == "v025_l030.png" || p["file"] == "v000_l030.png") {
       EXPECT_EQ(p["status"], "failed");
       EXPECT_NE(p["error"].get<std::string>().find(p["file"].get<std::string>()), std::string::npos) << p["error"];
     }
-  // Light 30 has no registered photo left: the dataset keeps lights with at least one photo.
+  // --allow-missing writes the others. Light 30 has no registered photo left: the dataset keeps
+  // lights with at least one photo.
+  EXPECT_EQ(test::RunCommand(base + (dir / "a.h5").string() + " --allow-missing", &out), 0) << out;
   const Dataset d = ReadDataset(dir / "a.h5");
   EXPECT_EQ(d.num_views(), 2);
   EXPECT_EQ(d.num_lights(), 1);
-  EXPECT_EQ(test::RunCommand(base + (dir / "b.h5").string() + " --allow-missing", &out), 0) << out;
 }
 
 TEST(RegisterCli, MissingPairsAreFilledFromTheNearestLight) {

@@ -141,8 +141,11 @@ int RunCalibrate(const CLI::App& app, const btf::cli::CommonFlags& common, Calib
   o.family_override = f.family_given;
   ApplyGamma(o.input, f.input_gamma);
   o.Check();
-  const btf::Board board = btf::ReadBoard(f.board);
   std::vector<std::filesystem::path> inputs(f.inputs.begin(), f.inputs.end());
+  std::vector<std::filesystem::path> read = inputs;
+  read.push_back(f.board);
+  btf::RefuseOutputOverInputs(f.output, read);
+  const btf::Board board = btf::ReadBoard(f.board);
   const btf::CalibrateSummary sum = btf::CalibrateCamera(o, inputs, board, btf::cli::MakeReporter(common));
   nlohmann::json views = nlohmann::json::array();
   for (const auto& v : sum.views)
@@ -167,28 +170,35 @@ int RunRegister(const CLI::App& app, const btf::cli::CommonFlags& common, RunFla
   ApplyGamma(ro.input, f.input_gamma);
   if (f.half) ro.write.storage = btf::h5::Storage::kFloat16;
   ro.Check();
+  std::vector<std::filesystem::path> inputs = btf::ManifestFiles(btf::ReadManifest(f.manifest), f.manifest);
+  inputs.push_back(f.manifest);
+  if (!ro.camera.empty()) inputs.push_back(ro.camera);
+  for (const std::string* out : {&f.output, &f.report, &f.sheet}) btf::RefuseOutputOverInputs(*out, inputs);
   // The dataset, report and contact sheet are all written under temporary names first and renamed
-  // together at the end, so a failure in any of them leaves every earlier output as it was.
+  // together at the end, so a failure in any of them leaves every earlier output as it was; a run
+  // with failed photos (without --allow-missing) replaces only the report, which lists them.
   btf::AtomicOutput data_out(f.output);
+  std::optional<btf::AtomicOutput> report_out, sheet_out;
+  if (!f.report.empty()) report_out.emplace(f.report);
+  if (!f.sheet.empty()) sheet_out.emplace(f.sheet);
   const btf::RegisterSummary sum =
       btf::RegisterPhotos(ro, f.manifest, data_out.temp_path(), btf::cli::MakeReporter(common));
   const nlohmann::json report = sum.ToJson();
-  std::optional<btf::AtomicOutput> report_out, sheet_out;
-  if (!f.report.empty()) {
-    report_out.emplace(f.report);
+  const bool failed = sum.photos_failed > 0 && !f.allow_missing;
+  std::vector<btf::AtomicOutput*> outputs;
+  if (!failed) outputs.push_back(&data_out);
+  if (report_out) {
     btf::WriteTextFileAtomic(report_out->temp_path(), btf::cli::JsonDocument(app, report).dump(2) + "\n");
+    outputs.push_back(&*report_out);
   }
-  if (!f.sheet.empty() && sum.contact_sheet.width > 0) {
+  if (sheet_out && !failed && sum.contact_sheet.width > 0) {
     btf::ImageWriteOptions wo;
     wo.has_format = true;
     wo.format = btf::PixelFormat::kUint8;
     wo.srgb = true;
-    sheet_out.emplace(f.sheet);
     btf::WriteImage(sheet_out->temp_path(), sum.contact_sheet, wo);
+    outputs.push_back(&*sheet_out);
   }
-  std::vector<btf::AtomicOutput*> outputs = {&data_out};
-  if (report_out) outputs.push_back(&*report_out);
-  if (sheet_out) outputs.push_back(&*sheet_out);
   btf::AtomicOutput::CommitTogether(outputs);
   nlohmann::json failures = nlohmann::json::array();
   for (const auto& r : sum.reports)
@@ -205,8 +215,10 @@ int RunRegister(const CLI::App& app, const btf::cli::CommonFlags& common, RunFla
     fmt::print("{} -> {}\n{}", f.manifest, f.output, sum.Report());
   }
   if (sum.photos_failed > 0 && !f.allow_missing) {
-    fmt::print(stderr, "btf-register: error: {} of {} photos failed (listed above{}); pass --allow-missing to accept\n",
-               sum.photos_failed, sum.photos, f.report.empty() ? "" : " and in the report");
+    fmt::print(stderr,
+               "btf-register: error: {} of {} photos failed (listed above{}); '{}' was not written (an earlier file "
+               "there is kept); pass --allow-missing to write a dataset without those images\n",
+               sum.photos_failed, sum.photos, f.report.empty() ? "" : " and in the report", f.output);
     return static_cast<int>(btf::ExitCode::kBadInput);
   }
   return 0;

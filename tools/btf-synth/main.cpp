@@ -76,6 +76,7 @@ struct PhotoFlags {
 
 int RunBtf(const CLI::App& app, const btf::cli::CommonFlags& common, BtfFlags& f) {
   const auto model = BuildModel(f.model);
+  btf::RefuseOutputOverInputs(f.output, {f.model.directions});
   const auto s = btf::Sampling::Named(f.model.directions);
   f.options.views = Subset(s, f.model.views, "--views");
   f.options.lights = Subset(s, f.model.lights, "--lights");

@@ -10,6 +10,7 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
+#include "libbtf/core/atomic_file.h"
 #include "libbtf/core/progress.h"
 #include "libbtf/io/dataset_io.h"
 
