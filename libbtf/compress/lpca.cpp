@@ -137,7 +137,20 @@ LpcaEnergies RunLpca(const MethodContext& ctx, Codec& codec, CompressSummary& su
   const SlotSource& in = ctx.input;
   const LpcaSetup setup{ctx, sum, std::size_t(in.height()) * in.width(),
                         std::size_t(in.views().size()) * in.lights().size() * in.channels()};
-  return LpcaRun(setup).Run(codec, measure);
+  try {
+    return LpcaRun(setup).Run(codec, measure);
+  } catch (const LpcaRows::HalfUnderflow& u) {
+    // Before any phase's work but the first read: the run starts again on a float matrix.
+    ctx.Warn(sum, fmt::format("{:.3g} of the data's energy lies below the half range's normal values (|x| < 6.1e-5, "
+                              "after the transform) and would lose precision in a half texel matrix: used "
+                              "--lpca-matrix float (4 bytes a value instead of 2; scale the data or use --log to keep half)",
+                              u.share));
+    CompressOptions o = ctx.options;
+    o.lpca.matrix = "float";
+    const MethodContext float_ctx{in, o, ctx.transform, ctx.ranks, ctx.reporter, ctx.writer};
+    const LpcaSetup again{float_ctx, sum, setup.N, setup.d};
+    return LpcaRun(again).Run(codec, measure);
+  }
 }
 
 }  // namespace lpca

@@ -243,6 +243,17 @@ class LpcaRows : public LpcaPhase {
   // Whether x becomes an infinity in half (NaN, Inf, or |x| rounding past kHalfMax: |x| >= 65520).
   static bool BeyondHalf(float x) { return !(std::fabs(x) < 65520.0f); }
 
+  // The first read of a half matrix measures, over whole slots (the same on every rank), the
+  // energy of the transformed values below half's normal range (|x| < 2^-14): stored as
+  // subnormals or flushed to zero, they keep only an absolute precision of 2^-25. Where they hold
+  // more than kUnderflowShare of the energy (a relative L2 rounding error up to its square root,
+  // 1e-3, against 2^-11 for normal values; a dataset scaled to 1e-30 would be stored as zeros),
+  // ReadRows throws HalfUnderflow and the LPCA runs again on a float matrix.
+  static constexpr double kUnderflowShare = 1e-6;
+  struct HalfUnderflow {
+    double share;  // of the energy below half's normal range
+  };
+
   // Throws for the first value of slot v (in slot order) beyond the half range: a NaN or Inf as
   // CheckFiniteSlot refuses it, another value naming it (every rank reads whole slots: all refuse).
   [[noreturn]] void RefuseBeyondHalf(int v, const float* slot) const;

@@ -48,6 +48,8 @@ void LpcaRows::ReadRows(const std::vector<std::size_t>& texels, const std::vecto
   const bool covers = texels.size() == N_;
   std::vector<float> buffer;  // the slot, where the source does not hold it or the log changes it
   if (norms) std::fill(norms, norms + texels.size(), 0.0);
+  const bool check_underflow = half() && sum_.lpca_passes == 0;
+  double energy = 0, below_normal = 0;  // of the transformed values: all, |x| < 2^-14
   for (int v = 0; v < V; ++v) {
     rep_.Progress(std::size_t(v), std::size_t(V), "read");
     const float* slot = tr_.log() ? nullptr : in_.ViewSlotData(v);
@@ -60,6 +62,16 @@ void LpcaRows::ReadRows(const std::vector<std::size_t>& texels, const std::vecto
     // RefuseBeyondHalf names them as CheckFiniteSlot does), so the slot is not scanned twice.
     if (tr_.log() || !half()) CheckFiniteSlot(in_, v, slot);
     tr_.Apply(in_.name(), v, buffer.data(), buffer.size());  // (with the log, slot is the buffer)
+    if (check_underflow) {
+      double e = 0, b = 0;
+#pragma omp parallel for schedule(static) reduction(+ : e, b)
+      for (std::ptrdiff_t i = 0; i < std::ptrdiff_t(in_.slot_size()); ++i) {
+        const double x = slot[i], xx = x * x;
+        e += xx;
+        if (std::fabs(x) < 0x1p-14) b += xx;
+      }
+      energy += e, below_normal += b;
+    }
     bool beyond = false;
     // channels: a compile-time 3 (RGB: the copies inlined) or C.
     const auto transpose = [&](auto channels) {
@@ -109,6 +121,7 @@ void LpcaRows::ReadRows(const std::vector<std::size_t>& texels, const std::vecto
     if (half() && (beyond || (!covers && std::any_of(slot, slot + in_.slot_size(), BeyondHalf))))
       RefuseBeyondHalf(v, slot);
   }
+  if (check_underflow && below_normal > kUnderflowShare * energy) throw HalfUnderflow{below_normal / energy};
   ++sum_.lpca_passes;
 }
 

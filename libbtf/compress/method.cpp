@@ -51,6 +51,8 @@ const MethodEntry kMethods[] = {
 }  // namespace
 
 void MethodContext::Warn(CompressSummary& summary, const std::string& warning) const {
+  // Once: a method that starts again (LPCA on a float matrix) meets its early warnings twice.
+  if (std::find(summary.warnings.begin(), summary.warnings.end(), warning) != summary.warnings.end()) return;
   summary.warnings.push_back(warning);
   if (ranks.rank() == 0) reporter.Warn("{}", warning);  // the same on every rank: reported once
 }

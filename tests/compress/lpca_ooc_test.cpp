@@ -4,6 +4,8 @@
 // texel order, and every sum keeps its order. Tolerance 0 is therefore the honest assertion.
 #include <gtest/gtest.h>
 
+#include <optional>
+
 #include <cstdlib>
 #include <string>
 
@@ -196,6 +198,31 @@ TEST(LpcaHalfMatrix, RefusesAValueBeyondTheHalfRangeAndFloatTakesIt) {
   const std::string late = test::ErrorOf([&] { test::CompressDataset(d, Lpca(8, "in-core", "half")); });
   EXPECT_NE(late.find("view 1, light 2, texel (y 95, x 7), channel 1"), std::string::npos) << late;
   EXPECT_EQ(test::ErrorOf([&] { test::CompressDataset(d, Lpca(8, "out-of-core", "half")); }), late);
+}
+
+// Values below half's normal range would be stored as subnormals or zeros (a dataset scaled to
+// 1e-30 would decode as all zero): the run switches to a float matrix, says so, and its error is
+// the float run's, measured on the codec as stored. In core and out of core alike.
+TEST(LpcaHalfMatrix, ValuesBelowTheHalfRangeSwitchToFloat) {
+  Dataset d = test::PerViewLowRank(test::BonnSubset(4), test::BonnSubset(5), 24, 24, 6, 0.05);
+  for (float& x : d.data()) x *= 1e-30f;
+  for (const char* memory : {"in-core", "out-of-core"}) {
+    std::optional<ScopedMaxBytes> limit;
+    if (std::string(memory) == "out-of-core") limit.emplace(kLimit);
+    CompressOptions o = Lpca(5, memory, "float");
+    o.components = 2;
+    CompressSummary f, h;
+    test::CompressDataset(d, o, &f);
+    o.lpca.matrix = "half";
+    test::CompressDataset(d, o, &h);
+    EXPECT_EQ(h.lpca_matrix, "float") << memory;
+    ASSERT_EQ(h.warnings.size(), 1u) << memory;
+    EXPECT_NE(h.warnings[0].find("--lpca-matrix float"), std::string::npos) << h.warnings[0];
+    // The same run as the float one: the same error (of the decoded codec against the input),
+    // well below 1 (an all-zero decode).
+    EXPECT_EQ(h.relative_error, f.relative_error) << memory;
+    EXPECT_LT(h.relative_error, 0.5) << memory;
+  }
 }
 
 }  // namespace
