@@ -12,6 +12,8 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <fmt/ranges.h>
+
 #include "libbtf/core/dataset.h"
 #include "libbtf/core/error.h"
 #include "libbtf/io/half.h"
@@ -418,6 +420,37 @@ std::vector<hsize_t> File::Dims(const std::string& name) const {
 }
 
 namespace {
+// A chunk of a chunked dataset that no writer wrote reads as fill values (zeros): refuses any
+// chunk of [offset, offset + count) (empty vectors: the whole dataset) that holds no data.
+void RefuseUnwrittenChunks(const File& f, hid_t ds, const std::string& name, const std::vector<hsize_t>& offset,
+                           const std::vector<hsize_t>& count) {
+  Handle dcpl(H5Dget_create_plist(ds));
+  if (H5Pget_layout(dcpl.id()) != H5D_CHUNKED) return;
+  Handle space(H5Dget_space(ds));
+  const int rank = H5Sget_simple_extent_ndims(space.id());
+  if (rank <= 0) return;
+  std::vector<hsize_t> dims(std::size_t(rank)), chunk(std::size_t(rank)), lo(dims), hi(dims), at(dims);
+  H5Sget_simple_extent_dims(space.id(), dims.data(), nullptr);
+  if (H5Pget_chunk(dcpl.id(), rank, chunk.data()) != rank) return;
+  for (std::size_t d = 0; d < dims.size(); ++d) {
+    const hsize_t first = offset.empty() ? 0 : offset[d], n = count.empty() ? dims[d] : count[d];
+    if (n == 0 || chunk[d] == 0) return;
+    lo[d] = first / chunk[d], hi[d] = (first + n - 1) / chunk[d];
+  }
+  std::vector<hsize_t> c = lo;
+  for (;;) {
+    for (std::size_t d = 0; d < dims.size(); ++d) at[d] = c[d] * chunk[d];
+    hsize_t stored = 0;
+    if (H5Dget_chunk_storage_size(ds, at.data(), &stored) < 0 || stored == 0)
+      ThrowBadInput("'{}': dataset '{}': its chunk at ({}) was never written, so it holds no values (the file is "
+                    "incomplete: its writer stopped early or wrote only part of it); write the file again",
+                    f.path(), name, fmt::join(at, ", "));
+    std::size_t d = dims.size();
+    while (d > 0 && ++c[d - 1] > hi[d - 1]) c[d - 1] = lo[d - 1], --d;
+    if (d == 0) return;
+  }
+}
+
 template <typename T>
 std::vector<T> ReadWhole(const File& f, const std::string& name, hid_t mem_type, H5T_class_t want_class) {
   const auto dims = f.Dims(name);
@@ -430,6 +463,7 @@ std::vector<T> ReadWhole(const File& f, const std::string& name, hid_t mem_type,
   const H5T_class_t cls = H5Tget_class(type.id());
   if (cls != want_class && !(want_class == H5T_FLOAT && cls == H5T_INTEGER))
     ThrowBadInput("'{}': dataset '{}' has the wrong element type", f.path(), name);
+  RefuseUnwrittenChunks(f, ds.id(), name, {}, {});
   std::vector<T> out(n);
   if constexpr (std::is_same_v<T, float>) {
     if (StoredAsHalf(ds.id())) {
@@ -509,6 +543,7 @@ void File::ReadSlab(const std::string& name, const std::vector<hsize_t>& offset,
   SilenceErrors();
   Handle ds = OpenDataset(name);
   Handle fspace = SelectSlab(*this, ds.id(), name, offset, count);
+  RefuseUnwrittenChunks(*this, ds.id(), name, offset, count);
   if (raw_chunks && ReadRawChunks(*this, ds.id(), name, offset, count, data, raw_chunks_)) return;
   Handle mspace(H5Screate_simple(static_cast<int>(count.size()), count.data(), nullptr));
   herr_t status;

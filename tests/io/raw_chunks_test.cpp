@@ -208,6 +208,44 @@ TEST(RawChunks, OtherPipelinesAndLayoutsReadCorrectly) {
   }
 }
 
+// A file from another writer whose chunks were not all written: H5Dread would return fill values
+// (zeros) for the missing ones. Both read paths refuse it, naming the file, the dataset and the
+// first missing chunk; the chunks that were written still read.
+TEST(RawChunks, UnwrittenChunksAreRefusedNotReadAsZeros) {
+  const auto path = test::TempDir() / "sparse.h5";
+  const Dataset d = TexturedDataset(3, 4, 5, 6);
+  WriteDataset(path, d);
+  {
+    const h5::File f = h5::File::OpenForUpdate(path);
+    ASSERT_GE(H5Ldelete(f.id(), kData, H5P_DEFAULT), 0);
+    const hsize_t dims[5] = {3, 4, 5, 6, 3}, image[5] = {1, 1, 5, 6, 3}, first[5] = {0, 0, 0, 0, 0};
+    const hsize_t view0[5] = {1, 4, 5, 6, 3};
+    h5::Handle space(H5Screate_simple(5, dims, nullptr));
+    h5::Handle dcpl(H5Pcreate(H5P_DATASET_CREATE));
+    H5Pset_chunk(dcpl.id(), 5, image);
+    H5Pset_deflate(dcpl.id(), 1);
+    h5::Handle ds(H5Dcreate2(f.id(), kData, H5T_IEEE_F32LE, space.id(), H5P_DEFAULT, dcpl.id(), H5P_DEFAULT));
+    ASSERT_TRUE(ds.valid());
+    h5::Handle mem(H5Screate_simple(5, view0, nullptr));
+    ASSERT_GE(H5Sselect_hyperslab(space.id(), H5S_SELECT_SET, first, nullptr, view0, nullptr), 0);
+    ASSERT_GE(H5Dwrite(ds.id(), H5T_NATIVE_FLOAT, mem.id(), space.id(), H5P_DEFAULT, d.data().data()), 0);  // view 0 only
+  }
+  for (const bool raw : {true, false}) {
+    DatasetReadOptions o;
+    o.raw_chunks = raw;
+    ExitCode code{};
+    const std::string e = test::ErrorOf([&] { ReadDataset(path, o); }, &code);
+    EXPECT_EQ(code, ExitCode::kBadInput) << e;
+    for (const std::string part : {path.string(), std::string("/btf/data"), std::string("(1, 0, 0, 0, 0)"), std::string("never written")})
+      EXPECT_NE(e.find(part), std::string::npos) << part << ": " << e;
+  }
+  // View 0 was written: a reader of that slot alone gets its values.
+  const h5::File f = h5::File::Open(path);
+  std::vector<float> slot(4 * 5 * 6 * 3);
+  f.ReadSlab(kData, {0, 0, 0, 0, 0}, {1, 4, 5, 6, 3}, slot.data());
+  EXPECT_TRUE(std::equal(slot.begin(), slot.end(), d.data().begin()));
+}
+
 // Where chunk (view, light) of /btf/data starts in the file, and its stored size.
 std::pair<haddr_t, hsize_t> ChunkLocation(const std::filesystem::path& path, hsize_t view, hsize_t light, hsize_t y = 0) {
   const h5::File f = h5::File::Open(path);
