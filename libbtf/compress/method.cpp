@@ -70,6 +70,7 @@ void FillErrors(const ErrorStats& e, CompressSummary& s) {
   s.max_abs_error = e.max_abs_error;
   s.psnr_peak = e.max_abs_reference;
   s.psnr_db = e.PsnrDb(e.max_abs_reference).value_or(std::numeric_limits<double>::infinity());
+  if (const std::string w = e.PeakDominance(); !w.empty()) s.warnings.push_back(w);
 }
 
 ErrorStats MeasureErrors(const SlotSource& in, const Codec& codec, const dist::Context& ranks) {

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include <Eigen/Core>
+#include <fmt/format.h>
 
 namespace btf {
 
@@ -53,6 +54,15 @@ void ErrorStats::Merge(const ErrorStats& o) {
   if (o.max_abs_error > max_abs_error) max_abs_error = o.max_abs_error, max_abs_index = o.max_abs_index;
   max_abs_reference = std::max(max_abs_reference, o.max_abs_reference);
   count += o.count;
+}
+
+std::string ErrorStats::PeakDominance() const {
+  const double peak_sq = max_abs_reference * max_abs_reference;
+  if (count < 10000 || !(peak_sq > 0.01 * sum_sq_reference)) return {};
+  return fmt::format("the reference's largest |value| {:.4g} holds {:.3g} % of its energy (its RMS is {:.4g}): the "
+                     "relative error and PSNR describe that value, not the rest (an outlier in the input?); compare "
+                     "with --metric rmse or remove it",
+                     max_abs_reference, 100 * peak_sq / sum_sq_reference, std::sqrt(sum_sq_reference / double(count)));
 }
 
 double ErrorStats::Rmse() const { return std::sqrt(Mse()); }

@@ -8,6 +8,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <optional>
+#include <string>
 
 namespace btf {
 
@@ -28,6 +29,10 @@ struct ErrorStats {
   std::optional<double> RelativeL2() const;
   // 10 log10(peak^2 / MSE) in dB; empty when MSE = 0 (identical) or peak <= 0.
   std::optional<double> PsnrDb(double peak) const;
+  // A warning when a few values dominate the reference, so that the relative error and PSNR
+  // describe them, not the rest: at least 10^4 values and the largest |value| holds over 1 % of
+  // the energy (max |ref|^2 > 0.01 sum ref^2; e.g. one 1e30 outlier). Empty otherwise.
+  std::string PeakDominance() const;
 };
 
 }  // namespace btf

@@ -160,7 +160,11 @@ double CompareSummary::Metric(const std::string& metric) const {
                     reference);
     return *rel_l2;
   }
-  if (metric == "psnr") return psnr_db ? *psnr_db : std::numeric_limits<double>::infinity();
+  if (metric == "psnr") {
+    if (!(peak > 0))
+      ThrowBadInput("the reference '{}' is all zero, so PSNR has no peak: give --peak or use --metric rmse", reference);
+    return psnr_db ? *psnr_db : std::numeric_limits<double>::infinity();
+  }
   ThrowUsage("unknown metric '{}': use rmse, rel or psnr", metric);
 }
 
@@ -179,6 +183,7 @@ nlohmann::json CompareSummary::ToJson() const {
   j["max_abs"] = max_abs;
   j["max_abs_at"] = {{"view", max_view}, {"light", max_light}, {"y", max_y}, {"x", max_x}, {"channel", max_channel}};
   j["mean_ssim"] = mean_ssim ? nlohmann::json(*mean_ssim) : nlohmann::json(nullptr);
+  j["notes"] = notes;
   j["view_rmse"] = view_rmse;
   j["light_rmse"] = light_rmse;
   j["worst_images"] = nlohmann::json::array();
@@ -195,11 +200,15 @@ std::string CompareSummary::Report() const {
                    height, channels, values);
   r += fmt::format("rmse       {:.6g}\n", rmse);
   r += fmt::format("rel_l2     {}\n", rel_l2 ? fmt::format("{:.6g}", *rel_l2) : "undefined (reference all zero)");
-  r += fmt::format("psnr       {} (peak {:.6g}, {})\n", psnr_db ? fmt::format("{:.3f} dB", *psnr_db) : "inf (identical)",
-                   peak, peak_source);
+  if (peak > 0)
+    r += fmt::format("psnr       {} (peak {:.6g}, {})\n", psnr_db ? fmt::format("{:.3f} dB", *psnr_db) : "inf (identical)",
+                     peak, peak_source);
+  else
+    r += "psnr       undefined (reference all zero: give --peak)\n";
   r += fmt::format("max_abs    {:.6g} at view {} light {} texel (y {}, x {}) channel {}\n", max_abs, max_view, max_light,
                    max_y, max_x, max_channel);
   if (mean_ssim) r += fmt::format("mean_ssim  {:.6f}\n", *mean_ssim);
+  for (const auto& n : notes) r += fmt::format("note       {}\n", n);
   r += fmt::format("\n{:>5} {:>9} {:>9} {:>12}   per-view RMSE\n", "view", "theta", "phi", "rmse");
   for (std::size_t v = 0; v < view_rmse.size() && v < view_angles.size(); ++v)
     r += fmt::format("{:>5} {:>9.2f} {:>9.2f} {:>12.6g}\n", v, RadToDeg(view_angles[v].theta),
@@ -243,9 +252,13 @@ void FindPeak(const CompareOptions& options, const SlotSource& ref, const Report
     s->peak = mx;
     s->peak_source = "max |reference value|";
   } else {
-    s->peak = 1;
-    s->peak_source = "1 (reference all zero)";
-    reporter.Warn("the reference '{}' is all zero: PSNR and SSIM use peak 1", ref.name());
+    s->peak = 0;
+    s->peak_source = "none (reference all zero)";
+    s->notes.push_back("the reference is all zero: the relative error is undefined, and PSNR and SSIM too unless "
+                       "--peak gives the peak");
+    reporter.Warn("the reference '{}' is all zero: relative error, PSNR and SSIM are undefined (give --peak for PSNR "
+                  "and SSIM)",
+                  ref.name());
   }
   s->times.Add("peak", timer.Seconds());
 }
@@ -305,7 +318,8 @@ std::vector<ImageError> MergeImageStats(const CompareOptions& options, const std
   s->rmse = total.Rmse();
   s->rel_l2 = total.RelativeL2();
   s->psnr_db = total.PsnrDb(s->peak);
-  if (options.ssim) s->mean_ssim = ssim / (double(V) * L);
+  if (options.ssim && s->peak > 0) s->mean_ssim = ssim / (double(V) * L);
+  if (const std::string w = total.PeakDominance(); !w.empty()) s->notes.push_back(w);
   for (const auto& e : per_view) s->view_rmse.push_back(e.Rmse());
   for (const auto& e : per_light) s->light_rmse.push_back(e.Rmse());
   return images;

@@ -52,7 +52,10 @@ struct CompareSummary {
   std::optional<double> psnr_db;
   double max_abs = 0;
   int max_view = 0, max_light = 0, max_y = 0, max_x = 0, max_channel = 0;
-  std::optional<double> mean_ssim;  // empty when SSIM was skipped
+  std::optional<double> mean_ssim;  // empty when SSIM was skipped or undefined (all-zero reference, no peak)
+  // Why a figure is undefined or says less than it seems (all-zero reference; a few values
+  // dominating the reference: ErrorStats::PeakDominance).
+  std::vector<std::string> notes;
   std::vector<double> view_rmse, light_rmse;
   std::vector<Angles> view_angles, light_angles;  // of the reference's samplings
   std::vector<ImageError> worst;             // worst images first

@@ -106,8 +106,24 @@ TEST(EvalMetrics, AllZeroReference) {
   t.data()[5] = 0.5f;
   const auto s = Compare(CompareOptions(), *MemorySource(ref), *MemorySource(t));
   EXPECT_FALSE(s.rel_l2.has_value());
-  EXPECT_EQ(s.peak, 1.0);
-  EXPECT_EQ(s.peak_source, "1 (reference all zero)");
+  // No peak: PSNR and SSIM are undefined (not a figure made from a peak of 1), with a note.
+  EXPECT_EQ(s.peak, 0.0);
+  EXPECT_EQ(s.peak_source, "none (reference all zero)");
+  EXPECT_FALSE(s.psnr_db.has_value());
+  EXPECT_FALSE(s.mean_ssim.has_value());
+  ASSERT_EQ(s.notes.size(), 1u);
+  EXPECT_NE(s.notes[0].find("all zero"), std::string::npos);
+  EXPECT_NE(s.Report().find("psnr       undefined"), std::string::npos) << s.Report();
+  ExitCode psnr_code{};
+  EXPECT_NE(test::ErrorOf([&] { s.Metric("psnr"); }, &psnr_code).find("--peak"), std::string::npos);
+  EXPECT_EQ(psnr_code, ExitCode::kBadInput);
+  // With --peak they are defined again.
+  CompareOptions with_peak;
+  with_peak.peak = 1;
+  const auto p = Compare(with_peak, *MemorySource(ref), *MemorySource(t));
+  EXPECT_TRUE(p.psnr_db.has_value());
+  EXPECT_TRUE(p.mean_ssim.has_value());
+  EXPECT_TRUE(p.notes.empty());
   EXPECT_NEAR(s.rmse, 0.5 / std::sqrt(double(ref.size())), 1e-9);
   try {
     s.Metric("rel");
@@ -118,6 +134,23 @@ TEST(EvalMetrics, AllZeroReference) {
   }
   // Both all zero: identical, relative error 0.
   EXPECT_EQ(*Compare(CompareOptions(), *MemorySource(ref), *MemorySource(ref)).rel_l2, 0.0);
+}
+
+// One outlier among values near 1: the relative error and PSNR are the outlier's; a note says so
+// (and btf-compress's summary warns with the same text). Without the outlier: no note.
+TEST(EvalMetrics, AReferenceDominatedByOneValueIsNoted) {
+  Dataset ref = test::MakeTestDataset(2, 3, 40, 50);  // 36000 values
+  Dataset t = ref;
+  for (float& x : t.data()) x *= 1.1f;
+  EXPECT_TRUE(Compare(CompareOptions(), *MemorySource(ref), *MemorySource(t)).notes.empty());
+  ref.at(1, 2, 3, 4, 0) = 1e30f;
+  t.at(1, 2, 3, 4, 0) = 1e30f;
+  const auto s = Compare(CompareOptions(), *MemorySource(ref), *MemorySource(t));
+  EXPECT_LT(*s.rel_l2, 1e-20);  // the outlier's: the 10 % error of the rest vanishes beside it
+  ASSERT_EQ(s.notes.size(), 1u);
+  EXPECT_NE(s.notes[0].find("1e+30"), std::string::npos) << s.notes[0];
+  EXPECT_NE(s.notes[0].find("--metric rmse"), std::string::npos) << s.notes[0];
+  EXPECT_NE(s.Report().find("note       the reference's largest"), std::string::npos);
 }
 
 TEST(EvalMetrics, RefusesNanAndInfNamingTheItem) {
