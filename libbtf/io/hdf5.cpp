@@ -1,5 +1,6 @@
 #include "libbtf/io/hdf5.h"
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <chrono>
@@ -348,7 +349,10 @@ void File::StartWriteback() const {
 void File::WriteString(const std::string& name, const std::string& text) const {
   Handle type = StringType(text.size());
   Handle space(H5Screate(H5S_SCALAR));
-  Handle ds(H5Dcreate2(id(), name.c_str(), type.id(), space.id(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT));
+  // In the object header (checksummed metadata) up to 32 KiB, as small arrays (WriteWhole).
+  Handle dcpl(H5Pcreate(H5P_DATASET_CREATE));
+  if (text.size() <= (32u << 10)) H5Pset_layout(dcpl.id(), H5D_COMPACT);
+  Handle ds(H5Dcreate2(id(), name.c_str(), type.id(), space.id(), H5P_DEFAULT, dcpl.id(), H5P_DEFAULT));
   if (!ds.valid() || H5Dwrite(ds.id(), type.id(), H5S_ALL, H5S_ALL, H5P_DEFAULT, text.data()) < 0)
     ThrowIo("'{}': cannot write '{}'", path_, name);
 }
@@ -364,6 +368,29 @@ std::string File::ReadString(const std::string& name) const {
 }
 
 namespace {
+// Every value a libbtf writer stores is checksummed, so that a damaged file is refused instead of
+// decoding to other values (docs/format.md, "Checksums"): small arrays and strings (up to
+// kCompactBytes) are stored in their object header (compact layout), which HDF5 1.10's format
+// checksums with the rest of the metadata; larger arrays in chunks of at most kChunkBytes with
+// Fletcher-32.
+constexpr hsize_t kCompactBytes = 32 << 10;
+constexpr hsize_t kChunkBytes = hsize_t(1) << 28;
+
+// Layout of a whole array of `dims` with elements of `element` bytes, given no chunk shape.
+void ChecksummedLayout(hid_t dcpl, const std::vector<hsize_t>& dims, std::size_t element) {
+  hsize_t bytes = element;
+  for (const hsize_t d : dims) bytes *= d;
+  if (bytes == 0) return;  // nothing stored
+  if (bytes <= kCompactBytes) {
+    H5Pset_layout(dcpl, H5D_COMPACT);
+    return;
+  }
+  std::vector<hsize_t> chunk = dims;  // whole trailing dimensions, as many leading rows as fit
+  chunk[0] = std::max<hsize_t>(1, std::min<hsize_t>(dims[0], kChunkBytes / std::max<hsize_t>(1, bytes / dims[0])));
+  H5Pset_chunk(dcpl, static_cast<int>(chunk.size()), chunk.data());
+  H5Pset_fletcher32(dcpl);
+}
+
 void WriteWhole(const File& f, const std::string& name, const std::vector<hsize_t>& dims, hid_t file_type,
                 hid_t mem_type, const void* data, const std::vector<hsize_t>& chunk = {}) {
   Handle space(H5Screate_simple(static_cast<int>(dims.size()), dims.data(), nullptr));
@@ -373,6 +400,8 @@ void WriteWhole(const File& f, const std::string& name, const std::vector<hsize_
     H5Pset_shuffle(dcpl.id());
     H5Pset_deflate(dcpl.id(), 4);
     H5Pset_fletcher32(dcpl.id());  // a damaged or truncated chunk is refused, never read as zeros
+  } else if (!dims.empty()) {
+    ChecksummedLayout(dcpl.id(), dims, H5Tget_size(file_type));
   }
   Handle ds(H5Dcreate2(f.id(), name.c_str(), file_type, space.id(), H5P_DEFAULT, dcpl.id(), H5P_DEFAULT));
   if (!ds.valid() || H5Dwrite(ds.id(), mem_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, data) < 0)
