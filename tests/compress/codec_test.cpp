@@ -710,5 +710,30 @@ TEST(Options, CheckRejectsBadValues) {
   EXPECT_THROW(ParseMethod("jpeg"), Error);
 }
 
+// --error with the component cap winning: every method says so (a warning naming the cap) instead
+// of returning the capped codec silently; met targets warn nothing.
+TEST(Targets, AMissedErrorTargetIsWarnedNamingTheLimit) {
+  const Dataset d = test::PerViewLowRank(test::BonnSubset(4), test::BonnSubset(5), 12, 12, 4, 0.05);
+  for (const CodecMethod m : {CodecMethod::kPcaView, CodecMethod::kLpca, CodecMethod::kFmf, CodecMethod::kDfmf}) {
+    SCOPED_TRACE(MethodName(m));
+    CompressOptions o;
+    o.method = m;
+    o.clusters = 2;
+    o.components = 1;
+    o.target_error = 0.001;  // far below what one component reaches on rank-4 data with 5 % noise
+    CompressSummary s;
+    test::CompressDataset(d, o, &s);
+    ASSERT_GT(s.relative_error, o.target_error);
+    ASSERT_EQ(s.warnings.size(), 1u);
+    for (const std::string part : {std::string("above --error 0.001"), std::string("-c 1"), std::string("raise -c")})
+      EXPECT_NE(s.warnings[0].find(part), std::string::npos) << s.warnings[0];
+    o.components = 16;
+    o.target_error = 0.5;  // met: no warning
+    test::CompressDataset(d, o, &s);
+    EXPECT_LE(s.relative_error, 0.5);
+    EXPECT_TRUE(s.warnings.empty()) << s.warnings[0];
+  }
+}
+
 }  // namespace
 }  // namespace btf
