@@ -336,7 +336,7 @@ auto CompressKeywords() {
 py::object RunCompress(const btf::CompressOptions& o, const std::filesystem::path& input,
                        const std::filesystem::path& output, const std::optional<py::function>& progress) {
   o.Check();
-  btf::RefuseOutputOverInputs(output, {input});
+  btf::CheckOutput(output, {input});
   // As btf-compress: claim the output first, so an unwritable folder fails before the work.
   btf::AtomicOutput target(output, btf::AtomicOutput::kReserve);
   const auto source = btf::OpenCompressInput(input);

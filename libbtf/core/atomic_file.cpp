@@ -113,12 +113,27 @@ std::string UnreplaceableKind(const std::filesystem::path& path) {
   return S_ISSOCK(st.st_mode) ? "a socket" : "not a regular file";
 }
 
+void RefuseUnreplaceable(const std::filesystem::path& path) {
+  if (const std::string kind = UnreplaceableKind(path); !kind.empty())
+    ThrowUsage("output '{}' is {}: only a regular file is replaced; choose a file name", path.string(), kind);
+}
+
+void RefuseMissingFolder(const std::filesystem::path& path) {
+  const auto dir = path.has_parent_path() ? path.parent_path() : std::filesystem::path(".");
+  if (!std::filesystem::is_directory(dir))
+    ThrowIo("output folder '{}' does not exist: create it first (mkdir -p '{}')", dir.string(), dir.string());
+}
+
 }  // namespace
 
-void RefuseOutputOverInputs(const std::filesystem::path& output, const std::vector<std::filesystem::path>& inputs) {
+void CheckOutput(const std::filesystem::path& output, const std::vector<std::filesystem::path>& inputs,
+                 OutputKind kind) {
   namespace fs = std::filesystem;
+  if (output.empty()) return;
+  if (kind == OutputKind::kFile) RefuseUnreplaceable(output);
+  RefuseMissingFolder(output);
   struct stat out {};
-  if (output.empty() || ::stat(output.c_str(), &out) != 0) return;  // a new output destroys nothing
+  if (::stat(output.c_str(), &out) != 0) return;  // a new output destroys nothing
   std::error_code ec;
   const fs::path folder = S_ISDIR(out.st_mode) ? fs::weakly_canonical(output, ec) : fs::path();
   for (const fs::path& input : inputs) {
@@ -139,11 +154,8 @@ void RefuseOutputOverInputs(const std::filesystem::path& output, const std::vect
 }
 
 AtomicOutput::AtomicOutput(std::filesystem::path final_path) : final_(std::move(final_path)) {
-  if (const std::string kind = UnreplaceableKind(final_); !kind.empty())
-    ThrowUsage("output '{}' is {}: only a regular file is replaced; choose a file name", final_.string(), kind);
-  const auto dir = final_.has_parent_path() ? final_.parent_path() : std::filesystem::path(".");
-  if (!std::filesystem::is_directory(dir))
-    ThrowIo("output folder '{}' does not exist: create it first", dir.string());
+  RefuseUnreplaceable(final_);
+  RefuseMissingFolder(final_);
   temp_ = TemporaryName(final_);
   slot_ = Register(temp_.string(), false);
 }
@@ -240,7 +252,7 @@ AtomicDirectory::AtomicDirectory(std::filesystem::path final_path, std::string m
                  "would be replaced as a whole: choose an empty or new folder",
                  final_.string(), marker);
   }
-  fs::create_directories(ParentOf(final_), ec);
+  RefuseMissingFolder(final_);  // one rule for file and folder outputs: the folder they go in exists
   temp_ = TemporaryName(final_);
   if (!fs::create_directory(temp_, ec))
     ThrowIo("cannot create '{}' beside the output folder: {} (no permission or disk full?)", temp_.string(), ec.message());

@@ -67,11 +67,17 @@ class AtomicDirectory {
   bool committed_ = false;
 };
 
-// Refuses (btf::Error, usage; exit 2) before any work an output that would destroy an input: an
-// output file that is the same file as an input (device and inode, so links and other spellings
-// of the path count), or an output folder (replaced as a whole) that holds an input. Outputs and
-// inputs that do not exist yet are fine.
-void RefuseOutputOverInputs(const std::filesystem::path& output, const std::vector<std::filesystem::path>& inputs);
+// An output is one file (AtomicOutput) or one folder (AtomicDirectory).
+enum class OutputKind { kFile, kFolder };
+
+// Checks an output before any work, so that a run fails at once instead of after the work
+// (empty output: nothing to check). Refuses (btf::Error, usage; exit 2) an output that would
+// destroy an input: an output file that is the same file as an input (device and inode, so links
+// and other spellings of the path count), or an output folder (replaced as a whole) that holds an
+// input; a file output whose path holds a folder, device, named pipe or socket (as AtomicOutput);
+// and (I/O, exit 4) an output whose folder does not exist. Inputs that do not exist are skipped.
+void CheckOutput(const std::filesystem::path& output, const std::vector<std::filesystem::path>& inputs,
+                 OutputKind kind = OutputKind::kFile);
 
 // Writes `size` bytes to `path` atomically (checked POSIX writes, fsync, rename).
 void WriteFileAtomic(const std::filesystem::path& path, const void* data, std::size_t size);

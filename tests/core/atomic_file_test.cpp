@@ -75,7 +75,7 @@ TEST(AtomicOutput, MissingFolderIsAnIoError) {
 
 // An output that is an input, by any name, is refused before anything is written; outputs and
 // inputs that do not exist are fine.
-TEST(RefuseOutputOverInputs, SameFileByAnyNameAndFoldersHoldingAnInput) {
+TEST(CheckOutput, SameFileByAnyNameAndFoldersHoldingAnInput) {
   namespace fs = std::filesystem;
   const auto dir = test::TempDir();
   std::ofstream(dir / "a.h5") << "input";
@@ -84,20 +84,20 @@ TEST(RefuseOutputOverInputs, SameFileByAnyNameAndFoldersHoldingAnInput) {
   fs::create_symlink(dir / "a.h5", dir / "soft.h5");
   for (const fs::path& out : {dir / "a.h5", dir / "sub" / ".." / "a.h5", dir / "hard.h5", dir / "soft.h5"}) {
     ExitCode code{};
-    const std::string msg = test::ErrorOf([&] { RefuseOutputOverInputs(out, {dir / "b.h5", dir / "a.h5"}); }, &code);
+    const std::string msg = test::ErrorOf([&] { CheckOutput(out, {dir / "b.h5", dir / "a.h5"}); }, &code);
     EXPECT_EQ(code, ExitCode::kUsage) << out;
     EXPECT_NE(msg.find("destroy the input"), std::string::npos) << msg;
     EXPECT_NE(msg.find(out.string()), std::string::npos) << msg;
   }
-  EXPECT_NO_THROW(RefuseOutputOverInputs(dir / "new.h5", {dir / "a.h5"}));
-  EXPECT_NO_THROW(RefuseOutputOverInputs(dir / "a.h5", {dir / "missing.h5", ""}));
-  EXPECT_NO_THROW(RefuseOutputOverInputs(dir / "sub", {dir / "a.h5"}));  // a folder beside the input
+  EXPECT_NO_THROW(CheckOutput(dir / "new.h5", {dir / "a.h5"}));
+  EXPECT_NO_THROW(CheckOutput(dir / "a.h5", {dir / "missing.h5", ""}));
+  EXPECT_NO_THROW(CheckOutput(dir / "sub", {dir / "a.h5"}));  // a folder beside the input
   std::ofstream(dir / "sub" / "c.h5") << "input";
   ExitCode code{};
-  const std::string msg = test::ErrorOf([&] { RefuseOutputOverInputs(dir / "sub", {dir / "sub" / "c.h5"}); }, &code);
+  const std::string msg = test::ErrorOf([&] { CheckOutput(dir / "sub", {dir / "sub" / "c.h5"}); }, &code);
   EXPECT_EQ(code, ExitCode::kUsage);
   EXPECT_NE(msg.find("holds the input"), std::string::npos) << msg;
-  EXPECT_NO_THROW(RefuseOutputOverInputs(dir / "su", {dir / "sub" / "c.h5"}));  // a name prefix is no folder
+  EXPECT_NO_THROW(CheckOutput(dir / "su", {dir / "sub" / "c.h5"}));  // a name prefix is no folder
 }
 
 // Only a regular file, a symbolic link or nothing may be replaced: a named pipe, a device or a

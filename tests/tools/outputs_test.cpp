@@ -95,5 +95,34 @@ TEST(Outputs, OnlyARegularFileIsReplaced) {
   EXPECT_TRUE(fs::is_empty(dir / "folder"));
 }
 
+// Outputs are checked before the work, by one rule for every tool: a file output onto a folder is
+// refused (exit 2), an output in a folder that does not exist too (exit 4: create it first), for
+// file and folder outputs alike; nothing is created.
+TEST(Outputs, AreCheckedBeforeTheWorkByOneRule) {
+  const fs::path dir = test::TempDir();
+  const std::string data = (dir / "a.h5").string(), codec = (dir / "c.h5").string();
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-synth") + " btf --views 0,1 --lights 0,1 --resolution 4 --samples 1 --quiet -o " + data), 0);
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-compress") + " " + data + " --method lpca -k 2 -c 1 --quiet -o " + codec), 0);
+  fs::create_directories(dir / "folder");
+  const std::string missing = (dir / "missing" / "x").string();
+  struct Case {
+    std::string command;
+    int code;
+  };
+  for (const Case& c : std::vector<Case>{
+           {test::Tool("btf-compress") + " decode " + codec + " -o " + (dir / "folder").string(), 2},
+           {test::Tool("btf-compress") + " decode " + codec + " -o " + missing, 4},
+           {test::Tool("btf-compress") + " export " + codec + " -o " + missing, 4},
+           {test::Tool("btf-convert") + " " + data + " -o " + (dir / "folder").string(), 2},
+           {test::Tool("btf-synth") + " photos --views 0 --lights 0 -o " + missing, 4},
+           {test::Tool("btf-eval") + " render " + codec + " -o " + (dir / "folder").string(), 2},
+       }) {
+    std::string out;
+    EXPECT_EQ(test::RunCommand(c.command + " --quiet 2>&1", &out), c.code) << c.command << "\n" << out;
+  }
+  EXPECT_FALSE(fs::exists(dir / "missing"));
+  EXPECT_TRUE(fs::is_empty(dir / "folder"));
+}
+
 }  // namespace
 }  // namespace btf

@@ -36,7 +36,7 @@ int RunCompress(const CLI::App& app, const btf::cli::CommonFlags& common, Compre
   if (f.output.empty()) btf::ThrowUsage("-o/--output is required when compressing");
   f.options.method = btf::ParseMethod(f.method);
   f.options.storage = btf::ParseStorage(f.storage);
-  btf::RefuseOutputOverInputs(f.output, {f.dataset, f.scene});
+  btf::CheckOutput(f.output, {f.dataset, f.scene});
   if (!f.scene.empty()) f.options.scene = btf::SceneSpec::Load(f.scene);
   // pca-view, lpca, fmf and dfmf split their work over MPI ranks (docs/scaling.md); rank 0 alone writes.
   if (f.options.method == btf::CodecMethod::kLpcaTensor || f.options.method == btf::CodecMethod::kNeural)
@@ -55,7 +55,7 @@ int RunCompress(const CLI::App& app, const btf::cli::CommonFlags& common, Compre
 
 int RunDecode(const CLI::App& app, const btf::cli::CommonFlags& common, const DecodeFlags& f) {
   btf::cli::RequireSingleRank("btf-compress decode");
-  btf::RefuseOutputOverInputs(f.output, {f.codec});
+  btf::CheckOutput(f.output, {f.codec});
   const btf::Codec codec = btf::ReadCodec(f.codec);
   const btf::DecodeSummary s = btf::DecodeToDatasetFile(codec, f.output, btf::cli::MakeReporter(common));
   btf::cli::PrintSummary(app, common, s, {{"codec", f.codec}});
@@ -64,7 +64,7 @@ int RunDecode(const CLI::App& app, const btf::cli::CommonFlags& common, const De
 
 int RunExport(const CLI::App& app, const btf::cli::CommonFlags& common, const ExportFlags& f) {
   btf::cli::RequireSingleRank("btf-compress export");
-  btf::RefuseOutputOverInputs(f.output, {f.codec});
+  btf::CheckOutput(f.output, {f.codec}, btf::OutputKind::kFolder);
   const btf::Codec codec = btf::ReadCodec(f.codec);
   const std::string format =
       !f.format.empty() ? f.format : codec.method() == btf::CodecMethod::kPcaView ? "sattler" : "schneider";

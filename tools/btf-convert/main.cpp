@@ -20,7 +20,7 @@ struct ConvertFlags {
 int RunConvert(const CLI::App& app, const btf::cli::CommonFlags& common, const ConvertFlags& f) {
   // Options and the output format are checked before the input is read.
   const std::string target = btf::ConvertTarget(f.options, f.output);
-  btf::RefuseOutputOverInputs(f.output, {f.input});
+  btf::CheckOutput(f.output, {f.input});
   // Only the factorisation to FMF / DFMF splits its work over MPI ranks (docs/scaling.md); every
   // other conversion refuses more than one rank.
   if (!f.options.layout.empty()) {

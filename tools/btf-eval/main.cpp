@@ -62,7 +62,7 @@ int RunView(SceneFlags& f) {
 
 int RunRenderWeb(const CLI::App& app, const btf::cli::CommonFlags& common, SceneFlags& f) {
   f.Check();
-  btf::RefuseOutputOverInputs(f.output, {f.source, f.scene});
+  btf::CheckOutput(f.output, {f.source, f.scene});
   btf::WebRenderSummary s = btf::RenderWeb(f.browser, f.Scene(), f.exposure, f.source, f.output, f.scene, f.page);
   if (f.frames > 0) s.benchmark = btf::BenchmarkWeb(f.browser, f.Scene(), f.exposure, f.source, f.frames);
   btf::cli::PrintSummary(app, common, s);
@@ -71,7 +71,7 @@ int RunRenderWeb(const CLI::App& app, const btf::cli::CommonFlags& common, Scene
 
 int RunRender(const CLI::App& app, const btf::cli::CommonFlags& common, SceneFlags& f) {
   f.Check();
-  btf::RefuseOutputOverInputs(f.output, {f.source, f.scene});
+  btf::CheckOutput(f.output, {f.source, f.scene});
   btf::cli::PrintSummary(app, common, btf::RenderCpu(f.source, f.Scene(), f.exposure, f.output, f.scene));
   return 0;
 }
@@ -114,7 +114,7 @@ int RunSweep(const CLI::App& app, const btf::cli::CommonFlags& common, SweepFlag
   if (f.viewer) o.viewer_dir = btf::ViewerDir(btf::BrowserOptions{}, /*need_playwright=*/false).string();
   o.render_options.height = std::max(8, o.render_options.width * 4 / 5);
   for (int i = 0; i < argc; ++i) o.command_line += (i ? " " : "") + std::string(i ? argv[i] : "btf-eval");
-  btf::RefuseOutputOverInputs(f.output, {f.dataset});
+  btf::CheckOutput(f.output, {f.dataset}, btf::OutputKind::kFolder);
   const btf::SweepSummary s = btf::RunSweep(o, f.dataset, f.output, btf::cli::MakeReporter(common));
   btf::cli::PrintSummary(app, common, s);
   return 0;

@@ -144,7 +144,7 @@ int RunCalibrate(const CLI::App& app, const btf::cli::CommonFlags& common, Calib
   std::vector<std::filesystem::path> inputs(f.inputs.begin(), f.inputs.end());
   std::vector<std::filesystem::path> read = inputs;
   read.push_back(f.board);
-  btf::RefuseOutputOverInputs(f.output, read);
+  btf::CheckOutput(f.output, read);
   const btf::Board board = btf::ReadBoard(f.board);
   const btf::CalibrateSummary sum = btf::CalibrateCamera(o, inputs, board, btf::cli::MakeReporter(common));
   nlohmann::json views = nlohmann::json::array();
@@ -173,7 +173,7 @@ int RunRegister(const CLI::App& app, const btf::cli::CommonFlags& common, RunFla
   std::vector<std::filesystem::path> inputs = btf::ManifestFiles(btf::ReadManifest(f.manifest), f.manifest);
   inputs.push_back(f.manifest);
   if (!ro.camera.empty()) inputs.push_back(ro.camera);
-  for (const std::string* out : {&f.output, &f.report, &f.sheet}) btf::RefuseOutputOverInputs(*out, inputs);
+  for (const std::string* out : {&f.output, &f.report, &f.sheet}) btf::CheckOutput(*out, inputs);
   // The dataset, report and contact sheet are all written under temporary names first and renamed
   // together at the end, so a failure in any of them leaves every earlier output as it was; a run
   // with failed photos (without --allow-missing) replaces only the report, which lists them.

@@ -76,7 +76,7 @@ struct PhotoFlags {
 
 int RunBtf(const CLI::App& app, const btf::cli::CommonFlags& common, BtfFlags& f) {
   const auto model = BuildModel(f.model);
-  btf::RefuseOutputOverInputs(f.output, {f.model.directions});
+  btf::CheckOutput(f.output, {f.model.directions});
   const auto s = btf::Sampling::Named(f.model.directions);
   f.options.views = Subset(s, f.model.views, "--views");
   f.options.lights = Subset(s, f.model.lights, "--lights");
@@ -92,6 +92,7 @@ int RunBtf(const CLI::App& app, const btf::cli::CommonFlags& common, BtfFlags& f
 
 int RunBrdf(const CLI::App& app, const btf::cli::CommonFlags& common, const BrdfFlags& f) {
   if (f.output.empty() && f.json_output.empty()) btf::ThrowUsage("brdf: give -o FILE.h5 and/or --json-out FILE.json");
+  for (const std::string& out : {f.output, f.json_output}) btf::CheckOutput(out, {f.model.directions});
   const auto model = BuildModel(f.model);
   const auto s = btf::Sampling::Named(f.model.directions);
   const auto views = Subset(s, f.model.views, "--views"), lights = Subset(s, f.model.lights, "--lights");
@@ -127,6 +128,7 @@ int RunBrdf(const CLI::App& app, const btf::cli::CommonFlags& common, const Brdf
 }
 
 int RunPhotos(const CLI::App& app, const btf::cli::CommonFlags& common, PhotoFlags& f) {
+  btf::CheckOutput(f.output, {f.model.directions}, btf::OutputKind::kFolder);
   const auto model = BuildModel(f.model);
   btf::PhotoOptions& po = f.options;
   po.views = po.lights = btf::Sampling::Named(f.model.directions);
