@@ -3,6 +3,7 @@
 // Programming errors are not reported this way; they are assertions.
 #include <stdexcept>
 #include <string>
+#include <string_view>
 
 #include <fmt/format.h>
 
@@ -57,10 +58,16 @@ template <typename... Args>
                          ::fmt::format("check failed: {} ({}:{})", #cond, __FILE__, __LINE__));  \
   } while (0)
 
-// Option checks: `Check()` methods of XxxOptions call this so the message names the field.
-#define BTF_CHECK_OPTION(cond, field, msg)                                                  \
-  do {                                                                                       \
-    if (!(cond)) ::btf::ThrowUsage("invalid option '{}': {} (required: {})", field, msg, #cond); \
+// Option checks: `Check()` methods of XxxOptions call this so the message names the field and
+// says what it must be (in words: the C++ condition is not for users).
+#define BTF_CHECK_OPTION(cond, field, msg)                                                                 \
+  do {                                                                                                      \
+    if (!(cond)) ::btf::ThrowUsage("invalid option '{}': {}{}", field, ::btf::MustBePrefix(msg), msg); \
   } while (0)
+
+// "must be " where an option message is a bare range or bound (">= 0", "1..16"), else "".
+inline const char* MustBePrefix(std::string_view msg) {
+  return !msg.empty() && std::string_view("<>=|(0123456789").find(msg[0]) != std::string_view::npos ? "must be " : "";
+}
 
 }  // namespace btf

@@ -8,6 +8,10 @@
 #include <iostream>
 #include <mutex>
 #include <set>
+#include <sstream>
+#include <vector>
+
+#include <fmt/ranges.h>
 
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
@@ -231,6 +235,67 @@ void PrintError(const CLI::App& app, const char* kind, const std::string& messag
   std::fprintf(stderr, "%s: %s: %s%s\n", app.get_name().c_str(), kind, RankTag().c_str(), message.c_str());
 }
 
+// Edit distance (insertions, deletions, substitutions) between a and b.
+std::size_t EditDistance(const std::string& a, const std::string& b) {
+  std::vector<std::size_t> row(b.size() + 1);
+  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    std::size_t diagonal = row[0];
+    row[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      const std::size_t up = row[j];
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (a[i - 1] != b[j - 1])});
+      diagonal = up;
+    }
+  }
+  return row[b.size()];
+}
+
+// The option names (`--long`, `-s`) of an app and its subcommands, and the subcommand names.
+void CollectNames(const CLI::App& app, std::vector<std::string>& options, std::vector<std::string>& commands) {
+  for (const CLI::Option* o : app.get_options()) {
+    for (const std::string& n : o->get_lnames()) options.push_back("--" + n);
+    for (const std::string& n : o->get_snames()) options.push_back("-" + n);
+  }
+  for (const CLI::App* sub : app.get_subcommands([](const CLI::App*) { return true; })) {
+    commands.push_back(sub->get_name());
+    CollectNames(*sub, options, commands);
+  }
+}
+
+// " (did you mean 'X'?)" for the nearest name within a third of the word's length, else "".
+std::string Nearest(const std::string& word, const std::vector<std::string>& names) {
+  std::string best;
+  std::size_t best_d = std::max<std::size_t>(2, word.size() / 3) + 1;
+  for (const std::string& n : names)
+    if (const std::size_t d = EditDistance(word, n); d < best_d) best = n, best_d = d;
+  return best.empty() ? "" : fmt::format(" (did you mean '{}'?)", best);
+}
+
+// CLI11's parse errors in docs/errors.md's style: what is wrong, the nearest valid name, where to
+// look.
+std::string ParseErrorMessage(const CLI::App& app, const CLI::ParseError& e) {
+  std::vector<std::string> options, commands;
+  CollectNames(app, options, commands);
+  std::string what = e.what();
+  if (dynamic_cast<const CLI::ExtrasError*>(&e)) {
+    const std::size_t colon = what.find(": ");
+    std::string message;
+    std::istringstream words(colon == std::string::npos ? what : what.substr(colon + 2));
+    for (std::string w; words >> w;) {
+      const bool option = w.rfind('-', 0) == 0;
+      const std::string name = option ? w.substr(0, w.find('=')) : w;
+      std::string hint = Nearest(name, option ? options : commands);
+      if (hint.empty() && !option && !commands.empty()) hint = fmt::format(" (commands: {})", fmt::join(commands, ", "));
+      message += fmt::format("{}unknown {} '{}'{}", message.empty() ? "" : "; ", option ? "option" : "argument", name, hint);
+    }
+    what = message;
+  } else if (what == "A subcommand is required" && !commands.empty()) {
+    what = fmt::format("a command is required: one of {}", fmt::join(commands, ", "));
+  }
+  return fmt::format("{}; see {} --help", what, app.get_name());
+}
+
 int RunTool(int argc, char** argv, CLI::App& app, const std::function<int()>& run) {
   InstallSignalCleanup();
   auto logger = spdlog::stderr_color_mt("btf");
@@ -242,8 +307,9 @@ int RunTool(int argc, char** argv, CLI::App& app, const std::function<int()>& ru
       app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
       // Every rank parses the same command line: rank 0 alone prints help or the error.
-      const int rc = PrintingRank() ? app.exit(e) : (e.get_exit_code() == 0 ? 0 : 1);
-      return rc == 0 ? 0 : static_cast<int>(ExitCode::kUsage);
+      if (e.get_exit_code() == 0) return PrintingRank() ? app.exit(e) : 0;  // --help, --version
+      if (PrintingRank()) PrintError(app, "error", ParseErrorMessage(app, e));
+      return static_cast<int>(ExitCode::kUsage);
     }
     CheckDistributable(app);
     return run();
