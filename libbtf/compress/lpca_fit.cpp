@@ -287,6 +287,7 @@ void LpcaFitter::Iterate(ClusterFit& fit) {
     if (better) fit = std::move(next);
     if (!enough) break;
   }
+  rep_.Progress(std::size_t(o_.lpca.max_iterations), std::size_t(o_.lpca.max_iterations), "lpca");  // converged
 }
 
 void LpcaFitter::StoreModel(const ClusterFit& fit, Codec& codec) {

@@ -121,6 +121,7 @@ void LpcaRows::ReadRows(const std::vector<std::size_t>& texels, const std::vecto
     if (half() && (beyond || (!covers && std::any_of(slot, slot + in_.slot_size(), BeyondHalf))))
       RefuseBeyondHalf(v, slot);
   }
+  rep_.Progress(std::size_t(V), std::size_t(V), "read");
   if (check_underflow && below_normal > kUnderflowShare * energy) throw HalfUnderflow{below_normal / energy};
   ++sum_.lpca_passes;
 }

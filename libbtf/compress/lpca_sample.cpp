@@ -114,6 +114,9 @@ template <typename Mat>
 std::vector<PcaResult> LpcaSampler::SampleRounds(const Mat& M, const double* norms, const std::vector<std::size_t>& rows,
                                     std::vector<std::int32_t> assign, std::vector<double>& errors,
                                     std::vector<double>& split_errors) const {
+  // Progress: the first rounds, then each split/merge trial (the bar ends early when they stop).
+  const std::size_t steps = std::size_t(o_.lpca.splits) + 1;
+  rep_.Progress(0, steps, "sample rounds");
   double energy = 0;
   for (std::size_t t : rows) energy += norms[t];
   std::vector<double> residual;
@@ -124,6 +127,7 @@ std::vector<PcaResult> LpcaSampler::SampleRounds(const Mat& M, const double* nor
   if (o_.lpca.prune) sketch = MakeSampleSketch(M, rows, fit.pca);
   RoundsOnSample(M, norms, rows, energy, residual, fit, &errors, sketch);
   for (int s = 0; s < o_.lpca.splits; ++s) {
+    rep_.Progress(std::size_t(s) + 1, steps, "sample rounds");
     ClusterFit trial{{}, {}, 0, {}};
     if (!ProposeSplitMerge(M, norms, rows, fit, trial.assign)) break;
     FitSample(M, rows, energy, residual, trial, &fit);
@@ -134,6 +138,7 @@ std::vector<PcaResult> LpcaSampler::SampleRounds(const Mat& M, const double* nor
     if (better) fit = std::move(trial);
     if (!enough) break;
   }
+  rep_.Progress(steps, steps, "sample rounds");
   return std::move(fit.pca);
 }
 
@@ -264,6 +269,7 @@ std::size_t LpcaSampler::ReassignSample(const Mat& M, const double* norms, const
 template <typename Mat>
 int LpcaSampler::Lloyd(const Mat& M, const double* norms, const std::vector<std::size_t>& sample, std::mt19937_64& rng,
           std::vector<std::int32_t>& assign) const {
+  rep_.Progress(0, std::size_t(kLloydRounds), "k-means");
   RowMatrixXf centers = SeedCenters(M, sample, rng);
   const std::size_t S = sample.size();
   std::vector<std::int32_t> next(S);
@@ -272,6 +278,7 @@ int LpcaSampler::Lloyd(const Mat& M, const double* norms, const std::vector<std:
   double objective = std::numeric_limits<double>::infinity();
   int rounds = 0;
   for (; rounds < kLloydRounds; ++rounds) {
+    rep_.Progress(std::size_t(rounds), std::size_t(kLloydRounds), "k-means");
     NearestCenters(M, norms, centers, sample.data(), S, next.data(), dist.data());
     const bool moved = next != assign;
     assign.swap(next);
@@ -281,6 +288,7 @@ int LpcaSampler::Lloyd(const Mat& M, const double* norms, const std::vector<std:
     objective = obj;
     UpdateMeans(M, sample, assign, dist, centers);
   }
+  rep_.Progress(std::size_t(kLloydRounds), std::size_t(kLloydRounds), "k-means");  // converged: the bar ends
   return rounds;
 }
 

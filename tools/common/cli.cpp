@@ -63,9 +63,10 @@ class ProgressDisplay {
       const int width = 30, filled = static_cast<int>(width * done / total);
       const double elapsed = std::chrono::duration<double>(now - start_).count();
       const double eta = done > 0 ? elapsed * (double(total) / done - 1) : 0;
-      std::fprintf(stderr, "\r%-24.24s [%.*s%*s] %3d%% %zu/%zu  %5.1fs  eta %5.1fs", stage_.c_str(), filled,
-                   "##############################", width - filled, "", percent, done, total, elapsed, eta);
-      if (done == total) std::fputc('\n', stderr), stage_.clear();
+      line_ = fmt::format("{:<24.24} [{:#<{}}{:{}}] {:3d}% {}/{}  {:5.1f}s  eta {:5.1f}s", stage_, "", filled, "",
+                          width - filled, percent, done, total, elapsed, eta);
+      std::fprintf(stderr, "\r%s", line_.c_str());
+      if (done == total) std::fputc('\n', stderr), stage_.clear(), line_.clear();
       std::fflush(stderr);
     } else if (percent / 10 != last_percent_ / 10 || done == total) {
       // Plain lines: one per 10 % step, so logs stay readable.
@@ -75,10 +76,21 @@ class ProgressDisplay {
     return true;
   }
 
+  // A log line while a bar is drawn on a terminal: the bar's line is cleared, the message written
+  // on its own line, and the bar drawn again below it, so the two never share a line.
+  template <typename F>
+  void Log(F&& write) {
+    std::lock_guard lock(mu_);
+    const bool bar = tty_ && !line_.empty();
+    if (bar) std::fputs("\r\033[K", stderr), std::fflush(stderr);
+    write();
+    if (bar) std::fprintf(stderr, "\r%s", line_.c_str()), std::fflush(stderr);
+  }
+
  private:
   bool quiet_, tty_;
   std::mutex mu_;
-  std::string stage_;
+  std::string stage_, line_;  // the current stage; the bar as last drawn (a terminal, until it ends)
   int last_percent_ = -1;
   std::chrono::steady_clock::time_point start_, last_draw_;
 };
@@ -99,12 +111,15 @@ Reporter MakeReporter(const CommonFlags& flags) {
   spdlog::set_level(quiet ? spdlog::level::warn : flags.verbose ? spdlog::level::debug : spdlog::level::info);
   auto display = std::make_shared<ProgressDisplay>(quiet);
   return Reporter(
-      [](LogLevel level, std::string_view msg) {
-        switch (level) {
-          case LogLevel::kDebug: spdlog::debug("{}", msg); break;
-          case LogLevel::kInfo: spdlog::info("{}", msg); break;
-          case LogLevel::kWarning: spdlog::warn("{}", msg); break;
-        }
+      [display](LogLevel level, std::string_view msg) {
+        display->Log([&] {
+          switch (level) {
+            case LogLevel::kDebug: spdlog::debug("{}", msg); break;
+            case LogLevel::kInfo: spdlog::info("{}", msg); break;
+            case LogLevel::kWarning: spdlog::warn("{}", msg); break;
+          }
+          spdlog::default_logger()->flush();
+        });
       },
       [display](std::size_t done, std::size_t total, std::string_view stage) {
         return display->Update(done, total, stage);
