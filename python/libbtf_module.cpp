@@ -410,6 +410,14 @@ py::object Compare(const py::object& reference, const py::object& test, double p
 }  // namespace
 
 PYBIND11_MODULE(libbtf, m) {
+  // Every array libbtf returns or takes is a NumPy array: without NumPy the import fails here,
+  // naming it, instead of at the first array.
+  try {
+    py::module_::import("numpy");
+  } catch (const py::error_already_set&) {
+    throw py::import_error("libbtf needs NumPy, which this Python cannot import: install it (Debian: apt install "
+                           "python3-numpy; pip: pip install numpy)");
+  }
   m.doc() = "libbtf: BTF datasets, codecs and Bonn .btf files as NumPy arrays (docs/python.md)";
   m.attr("__version__") = btf::Version();
   btf::h5::SilenceErrors();

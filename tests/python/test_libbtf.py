@@ -9,6 +9,7 @@ import json
 import os
 import signal
 import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -337,3 +338,22 @@ def test_errors_carry_the_tools_message_and_exit_code(data, tmp_path):
     tool("btf-synth", "btf", "--views", "0,1", "--lights", "0,3", "--resolution", 4, "--samples", 1, "-q", "-o", other)
     expect_error("bad_input", 3, str(other), libbtf.compare, gt, other)
     expect_error("usage", 2, "invalid option 'ssim_sigma'", libbtf.compare, gt, lpca, ssim_sigma=-1)
+
+
+def test_import_without_numpy_names_numpy():
+    # An interpreter where NumPy cannot be imported: libbtf fails at import, naming NumPy.
+    code = ("import sys\n"
+            "class Block:\n"
+            "    def find_spec(self, name, path=None, target=None):\n"
+            "        if name == 'numpy' or name.startswith('numpy.'):\n"
+            "            raise ImportError('No module named numpy (blocked)')\n"
+            "sys.meta_path.insert(0, Block())\n"
+            "try:\n"
+            "    import libbtf\n"
+            "except ImportError as e:\n"
+            "    print('ImportError:', e)\n"
+            "    sys.exit(0)\n"
+            "sys.exit(1)\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=os.environ.copy())
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "NumPy" in r.stdout and "python3-numpy" in r.stdout, r.stdout
