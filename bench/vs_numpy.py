@@ -16,6 +16,11 @@ already in memory (the read is not counted for them):
     each texel reassigned to the cluster that reconstructs it best, `ROUNDS` rounds, final fit.
 Errors are relative L2 over the whole BTF, ||X - X'||_F / ||X||_F, the definition our summary uses.
 Both sides use both cores (OpenMP for ours, OpenBLAS threads for NumPy). Prints one table.
+
+A fair peer: OPENBLAS_CORETYPE and OPENBLAS_L2_SIZE, set on some machines for old OpenBLAS builds,
+force a current OpenBLAS onto an older kernel and slow NumPy. The script re-executes itself
+without them before NumPy loads (ours does not use OpenBLAS), and prints the BLAS NumPy runs
+(threadpoolctl: library, version, kernel architecture, threads) with the table.
 """
 import os
 import subprocess
@@ -23,9 +28,27 @@ import sys
 import tempfile
 import time
 
-import numpy as np
+# Before NumPy loads OpenBLAS: a peer slowed by these variables is no peer.
+_SLOWING = ("OPENBLAS_CORETYPE", "OPENBLAS_L2_SIZE")
+if any(v in os.environ for v in _SLOWING):
+    _env = {k: v for k, v in os.environ.items() if k not in _SLOWING}
+    _env["BTF_VS_NUMPY_UNSET"] = ",".join(f"{v}={os.environ[v]}" for v in _SLOWING if v in os.environ)
+    os.execve(sys.executable, [sys.executable, *sys.argv], _env)
+
+import numpy as np  # noqa: E402
 
 ROUNDS = 2
+
+
+def blas_kernel():
+    """The BLAS NumPy runs, in words (threadpoolctl; Debian python3-threadpoolctl)."""
+    try:
+        from threadpoolctl import threadpool_info
+    except ImportError:
+        return "unknown (threadpoolctl missing: Debian python3-threadpoolctl)"
+    blas = [i for i in threadpool_info() if i.get("user_api") == "blas"]
+    return "; ".join(f"{i.get('internal_api')} {i.get('version')} kernel {i.get('architecture')} "
+                     f"threads {i.get('num_threads')}" for i in blas) or "none found"
 
 
 def main():
@@ -93,6 +116,9 @@ def main():
     rows.append(("LPCA k=32 c=8", f"sklearn KMeans + {ROUNDS} local-PCA rounds", ours_s, ours["relative_error"],
                  theirs_s, np.sqrt(err / total)))
 
+    unset = os.environ.get("BTF_VS_NUMPY_UNSET")
+    print(f"numpy {np.__version__}, BLAS: {blas_kernel()}"
+          f"{f' (unset for the peer: {unset})' if unset else ''}")
     print(f"input {path}: {V} x {L} directions, {H} x {W} texels, {C} channels")
     print(f"{'codec':<20} {'theirs':<36} {'ours s':>8} {'ours err':>9} {'theirs s':>9} {'their err':>9} {'speed-up':>8}")
     for name, how, os_, oe, ts, te in rows:
