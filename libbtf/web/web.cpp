@@ -168,17 +168,20 @@ Image ToneMap(const Image& linear, double exposure) {
   return out;
 }
 
-// scene.json for the viewer: everything the page needs to draw `options` as Render does
-// (camera, shape, tiles, light, background, environment samples, exposure, size).
+}  // namespace
+
 nlohmann::json ViewerSceneJson(const RenderOptions& o, double exposure) {
   o.Check();
   const RenderCamera cam;
+  // The environment's samples whatever the starting lighting: the page switches between point
+  // light and sky at any time.
+  RenderOptions sky = o;
+  sky.lighting = "environment";
   nlohmann::json dirs = nlohmann::json::array(), rad = nlohmann::json::array();
-  if (o.lighting == "environment")
-    for (const auto& e : EnvironmentSamples(o)) {
-      dirs.push_back(Vec(e.direction));
-      rad.push_back({e.radiance_solid_angle[0], e.radiance_solid_angle[1], e.radiance_solid_angle[2]});
-    }
+  for (const auto& e : EnvironmentSamples(sky)) {
+    dirs.push_back(Vec(e.direction));
+    rad.push_back({e.radiance_solid_angle[0], e.radiance_solid_angle[1], e.radiance_solid_angle[2]});
+  }
   return {{"shape", o.scene},
           {"lighting", o.lighting},
           {"width", o.width},
@@ -191,6 +194,8 @@ nlohmann::json ViewerSceneJson(const RenderOptions& o, double exposure) {
           {"exposure", exposure},
           {"environment", {{"name", o.environment}, {"directions", dirs}, {"radiance_solid_angle", rad}}}};
 }
+
+namespace {
 
 // An export folder (either layout) as a BtfEvaluator through its reference decoder (nearest texel
 // for uv, as DatasetEvaluator).

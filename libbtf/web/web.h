@@ -18,6 +18,10 @@ namespace btf {
 // "cylinder-env" (the cylinder under the sampled sky), at width x height pixels.
 std::vector<std::string> WebSceneNames();
 RenderOptions WebSceneOptions(const std::string& scene, int width, int height);
+// scene.json for the viewer: everything the page needs to draw `scene` as the CPU renderer does
+// (camera, shape, tiles, light, background, exposure, size) and the environment's samples, also
+// when the scene starts with the point light (the page's lighting choice switches to the sky).
+nlohmann::json ViewerSceneJson(const RenderOptions& scene, double exposure);
 
 struct CpuRenderSummary {
   std::string output, source, source_kind, scene;  // source_kind: export, codec or dataset
