@@ -23,6 +23,7 @@
 #include "libbtf/core/error.h"
 #include "libbtf/core/version.h"
 #include "libbtf/eval/metrics.h"
+#include "libbtf/io/convert.h"
 #include "libbtf/io/hdf5.h"
 
 namespace py = pybind11;
@@ -452,6 +453,15 @@ PYBIND11_MODULE(libbtf, m) {
                              "color_space, units, cos_theta_i_included, channel_names, texel_size_mm, provenance")
       .def("view_slot", &Source::view_slot, py::arg("view"), "float32 (lights, height, width, channels)")
       .def("image", &Source::image, py::arg("view"), py::arg("light"), "float32 (height, width, channels)")
+      .def(
+          "write_image",
+          [](const Source& s, int view, int light, const std::filesystem::path& path, double exposure) {
+            btf::CheckOutput(path, {s.path()});
+            btf::WriteSampleImage(s.source(), view, light, exposure, path);
+          },
+          py::arg("view"), py::arg("light"), py::arg("path"), py::kw_only(), py::arg("exposure") = 1.0,
+          "writes image (view, light) as .png (8-bit sRGB of exposure x value, clamped, as the renders) or .exr "
+          "(linear float x exposure), as btf-convert --view --light does")
       .def("abrdf", &Source::abrdf, py::arg("y"), py::arg("x"), "float32 (views, lights, channels) of texel (y, x)")
       .def("read_all", &Source::read_all, "float32 (views, lights, height, width, channels)")
       .def("decode", &Source::decode, py::arg("uv"), py::arg("wi"), py::arg("wo"), py::arg("filter") = "bilinear",

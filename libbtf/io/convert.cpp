@@ -1,14 +1,19 @@
 #include "libbtf/io/convert.h"
 
+#include <cmath>
 #include <vector>
 
 #include "libbtf/core/error.h"
+#include "libbtf/io/image_io.h"
 
 namespace btf {
 
 void ConvertOptions::Check() const {
-  BTF_CHECK_OPTION(to.empty() || to == "dataset" || to == "bdi" || to == "dfmf" || to == "fmf" || to == "pvf", "to",
-                   "must be dataset, bdi, dfmf, fmf or pvf");
+  BTF_CHECK_OPTION(to.empty() || to == "dataset" || to == "bdi" || to == "dfmf" || to == "fmf" || to == "pvf" ||
+                       to == "png" || to == "exr",
+                   "to", "must be dataset, bdi, dfmf, fmf, pvf, png or exr");
+  BTF_CHECK_OPTION(view >= 0 && light >= 0, "view", "view and light are indices >= 0");
+  BTF_CHECK_OPTION(std::isfinite(exposure) && exposure > 0, "exposure", "must be > 0");
   BTF_CHECK_OPTION(storage == "float32" || storage == "float16", "storage", "must be float32 or float16");
   BTF_CHECK_OPTION(deflate_level >= 0 && deflate_level <= 9, "deflate_level", "must be 0 to 9");
   BTF_CHECK_OPTION(scan_lines_per_chunk >= 1, "scan_lines_per_chunk", "must be at least 1");
@@ -25,7 +30,10 @@ nlohmann::json ConvertOptions::ToJson() const {
           {"scan_lines_per_chunk", scan_lines_per_chunk},
           {"layout", layout},
           {"pattern", pattern},
-          {"allow_missing", allow_missing}};
+          {"allow_missing", allow_missing},
+          {"view", view},
+          {"light", light},
+          {"exposure", exposure}};
 }
 
 std::string ConvertTarget(const ConvertOptions& options, const std::filesystem::path& output) {
@@ -37,8 +45,11 @@ std::string ConvertTarget(const ConvertOptions& options, const std::filesystem::
       to = "dataset";
     else if (ext == ".btf")
       to = "bdi";
+    else if (ext == ".png" || ext == ".exr")
+      to = ext.substr(1);
     else
-      ThrowUsage("cannot tell the output format from '{}': name it .h5 (dataset) or .btf (bdi), or give --to",
+      ThrowUsage("cannot tell the output format from '{}': name it .h5 (dataset), .btf (bdi), .png or .exr (one "
+                 "image: --view, --light), or give --to",
                  output.string());
   }
   return to;
@@ -63,6 +74,19 @@ std::string ConvertSummary::Report() const {
                      times.Total());
 }
 
+void WriteSampleImage(const SlotSource& input, int view, int light, double exposure, const std::filesystem::path& path) {
+  const int V = input.views().size(), L = input.lights().size();
+  if (view < 0 || view >= V || light < 0 || light >= L)
+    ThrowUsage("'{}' has {} views and {} lights: --view {} --light {} is not one of its images (0..{}, 0..{})",
+               input.name(), V, L, view, light, V - 1, L - 1);
+  Image img(input.width(), input.height(), input.channels());
+  input.ReadImage(view, light, img.pixels.data());
+  for (float& v : img.pixels) v = float(v * exposure);
+  ImageWriteOptions o;
+  if (path.extension() == ".png") o.has_format = true, o.format = PixelFormat::kUint8, o.srgb = true;
+  WriteImage(path, img, o);
+}
+
 ConvertSummary Convert(const ConvertOptions& options, const SlotSource& input, const std::filesystem::path& output,
                        const Reporter& reporter) {
   const std::string target = ConvertTarget(options, output);
@@ -82,7 +106,15 @@ ConvertSummary Convert(const ConvertOptions& options, const SlotSource& input, c
   s.height = input.height();
   s.width = input.width();
   s.channels = input.channels();
-  if (target == "bdi") {
+  if (target == "png" || target == "exr") {
+    if (output.extension() != "." + target)
+      ThrowUsage("--to {} writes a .{} file: name the output '{}'", target, target,
+                 std::filesystem::path(output).replace_extension(target).string());
+    WriteSampleImage(input, options.view, options.light, options.exposure, output);
+    s.views = s.lights = 1;
+    std::error_code ec;
+    s.bytes_written = std::filesystem::file_size(output, ec);
+  } else if (target == "bdi") {
     BdiWriteOptions o;
     o.scan_lines_per_chunk = options.scan_lines_per_chunk;
     s.bytes_written = WriteBdi(output, input, o, reporter);

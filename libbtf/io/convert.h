@@ -34,12 +34,17 @@ struct ConvertOptions {
   std::string pattern;
   // Missing (view, light) images are written as 0 instead of refusing the set.
   bool allow_missing = false;
+  // Image output ("png": 8-bit sRGB of exposure x value clamped to [0, 1], as the renders show
+  // it; "exr": the linear values x exposure, float): the (view, light) image, indices into the
+  // input's samplings.
+  int view = 0, light = 0;
+  double exposure = 1;
   void Check() const;
   nlohmann::json ToJson() const;
 };
 
-// The output format Convert writes for `output` ("dataset" or "bdi"); throws btf::Error (usage)
-// for an unknown --to or an extension it cannot map.
+// The output format Convert writes for `output` ("dataset", "bdi", "png" or "exr"); throws
+// btf::Error (usage) for an unknown --to or an extension it cannot map.
 std::string ConvertTarget(const ConvertOptions& options, const std::filesystem::path& output);
 
 struct ConvertSummary {
@@ -55,6 +60,11 @@ struct ConvertSummary {
 // Writes `input` to `output` (atomically: nothing appears under `output` on failure) as a dataset
 // or BDI. For "fmf", "dfmf" and "pvf" it throws btf::Error (usage): those are written by WriteFmf
 // and WritePvf (libbtf/compress), which btf-convert calls.
+// Writes the (view, light) image of `input` (a dataset, a codec decoded, a Bonn file) to `path`:
+// .png as 8-bit sRGB of exposure x value clamped to [0, 1] (the tone mapping of the renders),
+// .exr as linear float values x exposure. Throws btf::Error (usage) for indices out of range.
+void WriteSampleImage(const SlotSource& input, int view, int light, double exposure, const std::filesystem::path& path);
+
 ConvertSummary Convert(const ConvertOptions& options, const SlotSource& input, const std::filesystem::path& output,
                        const Reporter& reporter = {});
 

@@ -70,6 +70,41 @@ TEST(BtfConvert, DatasetToBdiThroughInfoCompressEvalAndBack) {
   EXPECT_TRUE(back.info().cos_theta_i_included);
 }
 
+// One (view, light) image out, of a dataset and of a codec decoded: .exr holds the values x
+// exposure exactly (float), .png the 8-bit sRGB of them clamped (as the renders), within one code.
+TEST(BtfConvert, OneImageOutAsExrAndPng) {
+  const auto dir = test::TempDir();
+  const std::string d = dir.string() + "/";
+  const Dataset ds = test::MakeTestDataset(3, 4, 6, 5);
+  WriteDataset(dir / "a.h5", ds);
+  std::string out;
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-convert") + " " + d + "a.h5 -o " + d + "i.exr --view 2 --light 1 --exposure 0.5 --json --quiet", &out), 0) << out;
+  EXPECT_EQ(nlohmann::json::parse(out)["output_format"], "exr");
+  const Image exr = ReadImage(dir / "i.exr");
+  ASSERT_EQ(exr.width, 5);
+  ASSERT_EQ(exr.height, 6);
+  for (int y = 0; y < 6; ++y)
+    for (int x = 0; x < 5; ++x)
+      for (int c = 0; c < 3; ++c) ASSERT_EQ(exr.at(x, y, c), ds.at(2, 1, y, x, c) * 0.5f);
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-convert") + " " + d + "a.h5 -o " + d + "i.png --view 2 --light 1 --exposure 0.5 --quiet"), 0);
+  const Image png = ReadImage(dir / "i.png");  // decoded back to linear through the sRGB curve
+  for (int y = 0; y < 6; ++y)
+    for (int x = 0; x < 5; ++x)
+      for (int c = 0; c < 3; ++c) {
+        const float want = std::min(1.0f, ds.at(2, 1, y, x, c) * 0.5f);
+        // One 8-bit sRGB code near 1 spans ~0.9 % in linear; near 0, 1/255 / 12.92.
+        ASSERT_NEAR(png.at(x, y, c), want, 0.01f * want + 4e-4f) << x << " " << y << " " << c;
+      }
+  // A codec: its decoded image.
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-compress") + " " + d + "a.h5 --method pca-view -c 3 -o " + d + "c.h5 --quiet >/dev/null"), 0);
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-convert") + " " + d + "c.h5 -o " + d + "c.exr --view 1 --light 3 --quiet"), 0);
+  EXPECT_EQ(ReadImage(dir / "c.exr").width, 5);
+  // Out of range: exit 2 naming the shape; nothing written.
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-convert") + " " + d + "a.h5 -o " + d + "x.png --view 3 --quiet 2>&1", &out), 2);
+  EXPECT_NE(out.find("3 views and 4 lights"), std::string::npos) << out;
+  EXPECT_FALSE(std::filesystem::exists(dir / "x.png"));
+}
+
 TEST(BtfConvert, HandBuiltDfmfInBtfInfo) {
   const auto dir = test::TempDir();
   test::Layout L;

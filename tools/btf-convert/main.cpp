@@ -71,10 +71,16 @@ int main(int argc, char** argv) {
   ConvertFlags f;
   btf::ConvertOptions& o = f.options;
   app.add_option("INPUT", f.input, "Input: dataset (.h5), codec (.h5) or Bonn .btf file; with --layout a folder or zip archive of images")->required();
-  app.add_option("-o,--output", f.output, "Output file (.h5 = dataset, .btf = BDI unless --to)")->required();
+  app.add_option("-o,--output", f.output,
+                 "Output file (.h5 = dataset, .btf = BDI, .png / .exr = the image --view, --light, unless --to)")
+      ->required();
   app.add_option("--to", o.to,
-                 "Output format: dataset | bdi | fmf | dfmf | pvf (pvf from a pca-view codec; default: from the output's "
-                 "extension)");
+                 "Output format: dataset | bdi | fmf | dfmf | pvf | png | exr (pvf from a pca-view codec; png / exr: one "
+                 "image; default: from the output's extension)");
+  app.add_option("--view", o.view, "Image output (.png / .exr): the view index of the image");
+  app.add_option("--light", o.light, "Image output (.png / .exr): the light index of the image");
+  app.add_option("--exposure", o.exposure,
+                 "Image output: values are multiplied by this (.png: then clamped to [0, 1], sRGB, as the renders)");
   app.add_option("--storage", o.storage, "Dataset output: float32 | float16");
   app.add_option("--deflate-level", o.deflate_level, "Dataset output: deflate level 0-9 (0 = none)");
   app.add_option("--scan-lines", o.scan_lines_per_chunk, "BDI output: texture rows per chunk");
