@@ -458,7 +458,8 @@ void RefuseUnwrittenChunks(const File& f, hid_t ds, const std::string& name, con
   Handle space(H5Dget_space(ds));
   const int rank = H5Sget_simple_extent_ndims(space.id());
   if (rank <= 0) return;
-  std::vector<hsize_t> dims(std::size_t(rank)), chunk(std::size_t(rank)), lo(dims), hi(dims), at(dims);
+  const std::size_t n = static_cast<std::size_t>(rank);
+  std::vector<hsize_t> dims(n), chunk(n), lo(n), hi(n), at(n);
   H5Sget_simple_extent_dims(space.id(), dims.data(), nullptr);
   if (H5Pget_chunk(dcpl.id(), rank, chunk.data()) != rank) return;
   for (std::size_t d = 0; d < dims.size(); ++d) {
