@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <numeric>
 
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
@@ -155,6 +156,60 @@ void CalibrateOptions::Check() const {
   BTF_CHECK_OPTION(std::isfinite(outlier_factor) && outlier_factor > 1, "outlier-factor", "> 1");
 }
 
+namespace {
+
+constexpr int kMaxRefits = 3;
+
+// Fits the camera to the photos' correspondences (views[view_of[i]] for photo i); per-photo RMS
+// and outliers (RMS over outlier_factor x the median, and over 0.2 px). With drop_outliers the
+// outliers are left out and the camera fitted again, until none is flagged, kMaxRefits refits,
+// or fewer than min_views photos would remain.
+void FitDroppingOutliers(const CalibrateOptions& o, const std::vector<std::vector<cv::Point3f>>& object,
+                         const std::vector<std::vector<cv::Point2f>>& image, const std::vector<int>& view_of,
+                         cv::Size size, CalibrateSummary& sum) {
+  std::vector<std::size_t> in(object.size());
+  std::iota(in.begin(), in.end(), std::size_t(0));
+  for (;;) {
+    std::vector<std::vector<cv::Point3f>> obj;
+    std::vector<std::vector<cv::Point2f>> img;
+    for (std::size_t i : in) obj.push_back(object[i]), img.push_back(image[i]);
+    const CameraFit fit = FitCamera(o.model, obj, img, size);
+    if (fit.K.empty() || !std::isfinite(fit.rms_px)) ThrowBadInput("calibrate: the fit failed (degenerate views)");
+    sum.camera.rms_px = fit.rms_px;
+    sum.camera.camera = CameraOfFit(o.model, size.width, size.height, fit);
+    std::vector<double> rms;
+    sum.corners_used = 0;
+    for (std::size_t j = 0; j < in.size(); ++j) {
+      rms.push_back(ReprojectionRms(o.model, fit, obj[j], img[j], j));
+      CalibrationView& v = sum.views[std::size_t(view_of[in[j]])];
+      v.rms_px = rms.back(), v.outlier = false;
+      sum.corners_used += static_cast<int>(obj[j].size());
+    }
+    const double med = Median(rms), limit = std::max(o.outlier_factor * med, 0.2);
+    std::vector<std::size_t> kept;
+    for (std::size_t j = 0; j < in.size(); ++j) {
+      if (!(rms[j] > limit)) kept.push_back(in[j]);
+      else sum.views[std::size_t(view_of[in[j]])].outlier = true;
+    }
+    sum.views_used = static_cast<int>(in.size());
+    if (!o.drop_outliers || kept.size() == in.size() || sum.refits == kMaxRefits ||
+        kept.size() < std::size_t(o.min_views))
+      return;
+    for (std::size_t j = 0; j < in.size(); ++j) {
+      CalibrationView& v = sum.views[std::size_t(view_of[in[j]])];
+      if (!v.outlier) continue;
+      v.used = false, v.dropped = true;
+      v.error = fmt::format("an outlier (reprojection RMS {:.3f} px, over {} x the median {:.3f} px): left out of the "
+                            "fit, which was done again without it",
+                            v.rms_px, o.outlier_factor, med);
+    }
+    in = std::move(kept);
+    ++sum.refits;
+  }
+}
+
+}  // namespace
+
 std::vector<std::string> CalibrateSummary::Outliers() const {
   std::vector<std::string> out;
   for (const auto& v : views)
@@ -175,12 +230,12 @@ nlohmann::json CalibrateSummary::ToJson() const {
   nlohmann::json vs = nlohmann::json::array();
   for (const auto& v : views) {
     nlohmann::json j = {{"file", v.file}, {"used", v.used}, {"markers", v.markers}, {"corners", v.corners}};
-    if (v.used) j["rms_px"] = v.rms_px, j["outlier"] = v.outlier;
+    if (v.used || v.dropped) j["rms_px"] = v.rms_px, j["outlier"] = v.outlier, j["dropped"] = v.dropped;
     if (!v.error.empty()) j["error"] = v.error;
     vs.push_back(j);
   }
-  return {{"camera", cam},         {"views_used", views_used}, {"corners_used", corners_used},
-          {"views", vs},           {"outliers", Outliers()},   {"seconds", times.ToJson()}};
+  return {{"camera", cam},     {"views_used", views_used}, {"corners_used", corners_used}, {"views", vs},
+          {"outliers", Outliers()}, {"refits", refits},       {"seconds", times.ToJson()}};
 }
 
 std::string CalibrateSummary::Report() const {
@@ -203,7 +258,10 @@ std::string CalibrateSummary::Report() const {
   if (!out.empty()) {
     std::string list;
     for (const auto& f : out) list += (list.empty() ? "" : ", ") + f;
-    r += fmt::format("outlier photos (RMS over outlier_factor x the median): {}\n", list);
+    r += fmt::format("outlier photos (RMS over outlier_factor x the median): {}{}\n", list,
+                     refits > 0 ? fmt::format("; left out, the camera fitted again without them ({} refit{})", refits,
+                                              refits > 1 ? "s" : "")
+                                : "; kept in the fit");
   }
   r += fmt::format("time: {}\n", times.Report());
   return r;
@@ -274,23 +332,11 @@ CalibrateSummary CalibrateCamera(const CalibrateOptions& o, const std::vector<st
   }
 
   t.Restart();
-  const CameraFit fit = FitCamera(o.model, object, image, cv::Size(width, height));
-  sum.camera.rms_px = fit.rms_px;
-  if (fit.K.empty() || !std::isfinite(sum.camera.rms_px)) ThrowBadInput("calibrate: the fit failed (degenerate views)");
-  sum.camera.camera = CameraOfFit(o.model, width, height, fit);
-  // Per-photo reprojection RMS; outliers against the median.
-  std::vector<double> rms;
-  for (std::size_t i = 0; i < object.size(); ++i) {
-    rms.push_back(ReprojectionRms(o.model, fit, object[i], image[i], i));
-    sum.views[static_cast<std::size_t>(view_of[i])].rms_px = rms.back();
-    sum.corners_used += static_cast<int>(object[i].size());
-  }
-  const double med = Median(rms);
-  for (std::size_t i = 0; i < rms.size(); ++i)
-    if (rms[i] > std::max(o.outlier_factor * med, 0.2)) sum.views[static_cast<std::size_t>(view_of[i])].outlier = true;
-  sum.views_used = static_cast<int>(object.size());
+  FitDroppingOutliers(o, object, image, view_of, cv::Size(width, height), sum);
   sum.times.Add("calibrate", t.Seconds());
-  for (const auto& f : sum.Outliers()) reporter.Warn("'{}': reprojection RMS over {} x the median: an outlier photo", f, o.outlier_factor);
+  for (const auto& f : sum.Outliers())
+    reporter.Warn("'{}': reprojection RMS over {} x the median: an outlier photo{}", f, o.outlier_factor,
+                  sum.refits > 0 ? ", left out of the fit" : " (kept in the fit)");
   return sum;
 }
 

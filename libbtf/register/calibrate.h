@@ -29,6 +29,9 @@ struct CalibrateOptions {
   int min_corners = 8;            // photos with fewer corners (marker or chessboard) found are left out
   int min_views = 3;              // fewer usable photos: btf::Error (bad input)
   double outlier_factor = 3;      // a photo whose RMS exceeds this x the median (and 0.2 px) is named an outlier
+  // Outlier photos are left out and the camera fitted again without them (up to 3 refits, while
+  // at least min_views photos remain); false keeps them in the fit, only named.
+  bool drop_outliers = true;
   void Check() const;
 };
 
@@ -38,14 +41,16 @@ struct CalibrationView {
   std::string error;      // why the photo was left out
   int markers = 0;        // board markers found
   int corners = 0;        // corners paired with the board (4 per marker, or ChArUco chessboard corners)
-  double rms_px = 0;      // reprojection RMS of this photo's corners
+  double rms_px = 0;      // reprojection RMS of this photo's corners (a dropped photo: in the fit it left)
   bool outlier = false;
+  bool dropped = false;   // an outlier left out of the final fit (used is then false)
 };
 
 struct CalibrateSummary {
   CameraFile camera;      // intrinsics and rms_px over all used corners
   std::vector<CalibrationView> views;
   int views_used = 0, corners_used = 0;
+  int refits = 0;         // fits again after dropping outliers
   PhaseTimes times;
   std::vector<std::string> Outliers() const;
   nlohmann::json ToJson() const;

@@ -78,7 +78,7 @@ void ApplyGamma(btf::ImageReadOptions& input, double gamma) {
 struct CalibrateFlags {
   std::vector<std::string> inputs;
   std::string board, output;
-  bool family_given = false;
+  bool family_given = false, keep_outliers = false;
   double input_gamma = 0;
   btf::CalibrateOptions options;
 };
@@ -139,6 +139,7 @@ int RunDetect(const CLI::App& app, const btf::cli::CommonFlags& common, DetectFl
 int RunCalibrate(const CLI::App& app, const btf::cli::CommonFlags& common, CalibrateFlags& f) {
   btf::CalibrateOptions& o = f.options;
   o.family_override = f.family_given;
+  o.drop_outliers = !f.keep_outliers;
   ApplyGamma(o.input, f.input_gamma);
   o.Check();
   std::vector<std::filesystem::path> inputs(f.inputs.begin(), f.inputs.end());
@@ -273,7 +274,9 @@ int main(int argc, char** argv) {
   ck->add_option("--min-corners", ko.min_corners, "Photos with fewer corners (marker or ChArUco) are left out");
   ck->add_flag("--charuco-corners", ko.charuco_corners, "ChArUco board: calibrate on its chessboard corners, not its markers'");
   ck->add_option("--min-views", ko.min_views, "Fewer usable photos is an error");
-  ck->add_option("--outlier-factor", ko.outlier_factor, "Photos with RMS over this x the median are named outliers");
+  ck->add_option("--outlier-factor", ko.outlier_factor,
+                 "Photos with RMS over this x the median (and 0.2 px) are outliers, left out and the camera fitted again");
+  ck->add_flag("--keep-outliers", kf.keep_outliers, "Keep outlier photos in the fit (only name them)");
   add_input_flags(ck, ko.input, kf.input_gamma);
 
   // run
