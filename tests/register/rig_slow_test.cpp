@@ -58,6 +58,39 @@ TEST(RigAccuracy, AprilGridInSrgbJpegWithBlurNoiseAndDistortionUpTo60Degrees) {
   }
 }
 
+// Two photos of another lens (k1 = +0.15 instead of -0.15) among 15 good ones: named outliers,
+// left out, and the refit recovers the camera of the 15 as if they were alone (bounds of
+// CalibrateRecoversTheWideAngleCamera); kept in the fit (--keep-outliers) they pull k1 off.
+TEST(RigAccuracy, CalibrateDropsOutlierPhotosAndFitsAgain) {
+  const auto dir = test::TempDir();
+  const std::string common = " photos --quiet --target aprilgrid --lights 0 --width 640 --height 480 --focal 500 "
+                             "--camera-distance 90 --k2 0.02 ";
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-synth") + common + "--views 0-14 --k1 -0.15 -o " + (dir / "good").string()), 0);
+  ASSERT_EQ(test::RunCommand(test::Tool("btf-synth") + common + "--views 1,5 --k1 0.15 -o " + (dir / "bad").string()), 0);
+  const std::string cal = test::Tool("btf-register") + " calibrate --quiet --json " + (dir / "good" / "manifest.json").string() +
+                          " " + (dir / "bad" / "manifest.json").string() + " --board " +
+                          (dir / "good" / "board.json").string() + " -o " + (dir / "camera.json").string();
+  std::string out;
+  ASSERT_EQ(test::RunCommand(cal, &out), 0) << out;
+  const json j = json::parse(out);
+  const CameraFile c = ReadCameraFile(dir / "camera.json");
+  std::printf("dropped: k1 %.6f fx %.4f RMS %.4f px, %d views, %d refits\n", c.camera.k1, c.camera.fx, c.rms_px,
+              j["views_used"].get<int>(), j["refits"].get<int>());
+  EXPECT_EQ(j["outliers"].size(), 2u) << out;
+  EXPECT_EQ(j["views_used"], 15);
+  EXPECT_GE(j["refits"], 1);
+  EXPECT_LT(std::abs(c.camera.k1 / -0.15 - 1), 0.02);
+  EXPECT_LT(std::abs(c.camera.fx / 500 - 1), 0.002);
+  EXPECT_LE(c.rms_px, 0.1);
+  ASSERT_EQ(test::RunCommand(cal + " --keep-outliers", &out), 0) << out;
+  const json k = json::parse(out);
+  const CameraFile kept = ReadCameraFile(dir / "camera.json");
+  std::printf("kept: k1 %.6f fx %.4f RMS %.4f px\n", kept.camera.k1, kept.camera.fx, kept.rms_px);
+  EXPECT_EQ(k["views_used"], 17);
+  EXPECT_EQ(k["refits"], 0);
+  EXPECT_GT(kept.rms_px, c.rms_px);
+}
+
 TEST(RigAccuracy, CalibrateRecoversTheWideAngleCamera) {
   // 15 photos of the default 6 x 6 AprilGrid (2-bit border) by a 640 x 480 camera with f = 500 px,
   // k1 = -0.15, k2 = 0.02, views 0-14 of bonn81 (0, 15 and 30 deg), 90 mm away. The truth: fx = fy =
