@@ -72,6 +72,37 @@ void LpcaTensorModel::FunctionsAtView(int view, std::vector<float>& out) const {
     }
 }
 
+LpcaModel ExpandToLpca(const LpcaTensorModel& m) {
+  const int F = m.functions_per_cluster(), c = m.components;
+  const std::size_t S = m.seg(), d = std::size_t(m.views) * S, K = std::size_t(m.clusters);
+  LpcaModel l;
+  l.clusters = m.clusters, l.components = c;
+  l.cluster_components = m.cluster_components, l.cluster_of = m.cluster_of, l.weights = m.weights;
+  l.means.assign(K * d, 0.0f);
+  l.basis.assign(K * std::size_t(c) * d, 0.0f);
+  std::vector<float> at_view;
+  for (int v = 0; v < m.views; ++v) {
+    m.FunctionsAtView(v, at_view);
+    for (std::size_t k = 0; k < K; ++k) {
+      const float* fk = &at_view[k * F * S];
+      std::copy(fk, fk + S, &l.means[k * d + std::size_t(v) * S]);
+      for (int j = 0; j < c; ++j)
+        std::copy(fk + std::size_t(1 + j) * S, fk + std::size_t(2 + j) * S,
+                  &l.basis[(k * std::size_t(c) + std::size_t(j)) * d + std::size_t(v) * S]);
+    }
+  }
+  return l;
+}
+
+Codec ExpandToLpcaCodec(const Codec& t) {
+  BTF_CHECK(t.method() == CodecMethod::kLpcaTensor);
+  Codec out = CodecBuilder::Make(CodecMethod::kLpca, t.views(), t.lights(), t.height(), t.width(), t.channels(),
+                                 t.info(), t.value_map());
+  CodecBuilder::lpca(out) = ExpandToLpca(t.lpca_tensor());
+  CodecBuilder::provenance(out) = t.provenance();
+  return out;
+}
+
 void LpcaTensorModel::AddFunction(int k, int f, int view, int light, double coef, double* acc) const {
   const std::size_t fi = std::size_t(k) * functions_per_cluster() + f, S = seg();
   for (std::uint32_t t = first[fi]; t < first[fi + 1]; ++t) {

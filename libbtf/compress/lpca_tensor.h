@@ -19,6 +19,7 @@ namespace h5 {
 class File;
 }
 struct LpcaModel;
+class Codec;
 
 // Dequantised value of a stored code q: float(double(bias) + double(scale) * q) (docs/format.md).
 inline float Dequantise(float scale, float bias, std::uint32_t q) {
@@ -91,5 +92,13 @@ double FactoriseLpca(const LpcaModel& lpca, int views, int lights, int channels,
 // out-of-range codes, ranks and indices, and non-finite scales (bad input, naming file and item).
 void WriteLpcaTensorModel(const h5::File& file, const LpcaTensorModel& m, int height, int width);
 LpcaTensorModel ReadLpcaTensorModel(const h5::File& file, int views, int lights, int height, int width, int channels);
+
+// The plain LPCA model an lpca-tensor model factorises: each cluster's mean and Eigen-ABRDFs
+// expanded from their terms (a views x lights x channels vector each), the same clusters and
+// weights. It decodes to the same values up to float rounding (the terms summed per value).
+LpcaModel ExpandToLpca(const LpcaTensorModel& m);
+// An lpca-tensor codec as that LPCA codec (samplings, conventions and transform kept), so that
+// what takes LPCA codecs (the renderer export, Schneider 2004) takes it too.
+Codec ExpandToLpcaCodec(const Codec& tensor);
 
 }  // namespace btf

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "libbtf/compress/lpca_tensor.h"
 #include "libbtf/core/atomic_file.h"
 #include "libbtf/core/error.h"
 #include "libbtf/export/export_common.h"
@@ -213,9 +214,11 @@ nlohmann::json SchneiderManifest(const SchneiderExportOptions& o, const Codec& c
 SchneiderExportSummary ExportSchneider(const SchneiderExportOptions& o, const Codec& codec,
                                        const std::filesystem::path& out_dir, const Reporter& rep) {
   o.Check();
+  // lpca-tensor: its factorised functions expanded, exported as the LPCA codec they make.
+  if (codec.method() == CodecMethod::kLpcaTensor) return ExportSchneider(o, ExpandToLpcaCodec(codec), out_dir, rep);
   if (codec.method() != CodecMethod::kLpca)
-    ThrowUsage("the schneider export needs an LPCA codec; this one is '{}' (compress with --method lpca; a pca-view "
-               "codec exports with --format sattler)",
+    ThrowUsage("the schneider export needs an LPCA (or lpca-tensor) codec; this one is '{}' (compress with --method "
+               "lpca; a pca-view codec exports with --format sattler)",
                MethodName(codec.method()));
   if (codec.transform() != ValueTransform::kNone)
     ThrowUsage("the schneider export needs a codec without value transform (the renderer sums weighted "

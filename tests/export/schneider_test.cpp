@@ -1,5 +1,6 @@
 #include "libbtf/compress/compress.h"
 #include "libbtf/export/schneider.h"
+#include "libbtf/compress/lpca_tensor.h"
 
 #include <gtest/gtest.h>
 
@@ -27,8 +28,18 @@ Codec SmallLpca() {
 // At grid nodes the trilinear fetch is exact, so the only difference to the codec's own
 // barycentric decoder is the storage rounding: |diff| <= sum_f |terms[1 + f]| * per_t (u8: 1/510,
 // f16: 2^-12), plus 1e-5 for float arithmetic in the decoders (values are O(1)).
-void ExpectGridNodesWithinBound(const std::string& storage, int atlas_side, double min_used_fraction) {
-  const Codec codec = SmallLpca();
+Codec SmallLpcaTensor() {
+  const Dataset d = test::ClusteredLowRank(test::BonnSubset(19), test::BonnSubset(19), 6, 5, 3, 2);
+  CompressOptions o;
+  o.method = CodecMethod::kLpcaTensor;
+  o.clusters = 3;
+  o.components = 2;
+  o.tensor.quant_bits = 8;
+  return test::CompressDataset(d, o);
+}
+
+void ExpectGridNodesWithinBound(const std::string& storage, int atlas_side, double min_used_fraction,
+                                const Codec& codec = SmallLpca()) {
   const auto dir = test::TempDir() / ("export_" + storage);
   SchneiderExportOptions o;
   o.view_grid = 8;
@@ -72,6 +83,17 @@ TEST(SchneiderExport, ReferenceDecoderMatchesCodecToTheQuantizationErrorU8) { Ex
 TEST(SchneiderExport, ReferenceDecoderMatchesCodecToTheQuantizationErrorF16) { ExpectGridNodesWithinBound("f16", 256, 0.01); }
 
 // A small atlas side forces several tiles rows and pages: the layout formula is still what the decoder reads.
+// lpca-tensor exports as the LPCA codec its terms make (ExpandToLpcaCodec): the same bound
+// against its own decoder, and the expansion decodes as the tensor codec does (float rounding of
+// the summed terms: 1e-5 of values O(1)).
+TEST(SchneiderExport, LpcaTensorExportsAsTheLpcaItFactorises) {
+  const Codec tensor = SmallLpcaTensor();
+  ExpectGridNodesWithinBound("f16", 256, 0.01, tensor);
+  const Dataset a = tensor.DecodeAll(), b = ExpandToLpcaCodec(tensor).DecodeAll();
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t i = 0; i < a.size(); ++i) ASSERT_NEAR(a.data()[i], b.data()[i], 1e-5) << i;
+}
+
 TEST(SchneiderExport, AtlasWithSeveralPagesDecodesTheSame) { ExpectGridNodesWithinBound("u8", 36, 0.1); }
 
 TEST(SchneiderExport, ScaleAndBiasUseTheFullEightBitRange) {
