@@ -116,6 +116,12 @@ CompressSummary CompressAndWrite(const CompressOptions& options, const SlotSourc
                                  const dist::Context& ranks) {
   options.Check();
   BTF_CHECK(codec_out != nullptr);
+  if (const auto missing = input_full.missing(); !missing.empty())
+    ThrowBadInput("'{}' marks {} of {} images missing (first: view {}, light {}): every codec is fitted to all "
+                  "images and would take their zeros for measurements; import the set again with --directions "
+                  "present (only the directions with images), or add the missing photos",
+                  input_full.name(), missing.size(), std::size_t(input_full.views().size()) * input_full.lights().size(),
+                  missing.front().first, missing.front().second);
   CompressOptions o = options;
   CompressSummary sum;
   sum.input = input_full.name();

@@ -184,6 +184,7 @@ nlohmann::json CompareSummary::ToJson() const {
   j["max_abs_at"] = {{"view", max_view}, {"light", max_light}, {"y", max_y}, {"x", max_x}, {"channel", max_channel}};
   j["mean_ssim"] = mean_ssim ? nlohmann::json(*mean_ssim) : nlohmann::json(nullptr);
   j["notes"] = notes;
+  j["skipped_images"] = skipped_images;
   j["view_rmse"] = view_rmse;
   j["light_rmse"] = light_rmse;
   j["worst_images"] = nlohmann::json::array();
@@ -266,7 +267,8 @@ void FindPeak(const CompareOptions& options, const SlotSource& ref, const Report
 // Pass 2: every image's error sums and SSIM, one view slot of each input at a time (each rank
 // its own views, then shared so that every rank holds all of them).
 std::vector<ImageStats> MeasureImages(const CompareOptions& options, const SlotSource& ref, const SlotSource& test,
-                                      const Reporter& reporter, double peak, float* rslot, float* tslot) {
+                                      const std::vector<char>& skip, const Reporter& reporter, double peak,
+                                      float* rslot, float* tslot) {
   const int V = int(ref.views().size()), L = int(ref.lights().size());
   const int H = ref.height(), W = ref.width(), C = ref.channels();
   const std::size_t image = ref.image_size();
@@ -280,8 +282,9 @@ std::vector<ImageStats> MeasureImages(const CompareOptions& options, const SlotS
     CheckFiniteSlot(test, v, tslot);
 #pragma omp parallel for schedule(dynamic)
     for (int l = 0; l < L; ++l)
-      stats[std::size_t(v) * L + l] = MeasureImage(rslot + l * image, tslot + l * image, H, W, C,
-                                                   peak, options.ssim, options.ssim_sigma);
+      if (!skip[std::size_t(v) * L + l])
+        stats[std::size_t(v) * L + l] = MeasureImage(rslot + l * image, tslot + l * image, H, W, C,
+                                                     peak, options.ssim, options.ssim_sigma);
   }
   reporter.Progress(V, V, "compare");
   if (dist::Distributed()) ShareImageStats(V, L, &stats);
@@ -292,7 +295,7 @@ std::vector<ImageStats> MeasureImages(const CompareOptions& options, const SlotS
 // largest error, in a fixed order (deterministic sums), the same on every rank and for any rank
 // count. Returns every image's error, for the worst-image list.
 std::vector<ImageError> MergeImageStats(const CompareOptions& options, const std::vector<ImageStats>& stats,
-                                        CompareSummary* s) {
+                                        const std::vector<char>& skip, CompareSummary* s) {
   const int V = s->views, L = s->lights, W = s->width, C = s->channels;
   ErrorStats total;
   double ssim = 0;
@@ -300,6 +303,7 @@ std::vector<ImageError> MergeImageStats(const CompareOptions& options, const std
   std::vector<ImageError> images;
   for (int v = 0; v < V; ++v)
     for (int l = 0; l < L; ++l) {
+      if (skip[std::size_t(v) * L + l]) continue;
       const ImageStats& st = stats[std::size_t(v) * L + l];
       const ErrorStats& e = st.errors;
       total.Merge(e);
@@ -318,7 +322,7 @@ std::vector<ImageError> MergeImageStats(const CompareOptions& options, const std
   s->rmse = total.Rmse();
   s->rel_l2 = total.RelativeL2();
   s->psnr_db = total.PsnrDb(s->peak);
-  if (options.ssim && s->peak > 0) s->mean_ssim = ssim / (double(V) * L);
+  if (options.ssim && s->peak > 0 && !images.empty()) s->mean_ssim = ssim / double(images.size());
   if (const std::string w = total.PeakDominance(); !w.empty()) s->notes.push_back(w);
   for (const auto& e : per_view) s->view_rmse.push_back(e.Rmse());
   for (const auto& e : per_light) s->light_rmse.push_back(e.Rmse());
@@ -377,12 +381,20 @@ CompareSummary Compare(const CompareOptions& options, const SlotSource& ref, con
   s.width = ref.width();
   s.channels = ref.channels();
   std::vector<float> rslot(ref.slot_size()), tslot(ref.slot_size());
+  // Images either input marks missing hold no measurement: left out of every figure.
+  std::vector<char> skip(std::size_t(s.views) * s.lights, 0);
+  for (const SlotSource* src : {&ref, &test})
+    for (const auto& [v, l] : src->missing()) skip[std::size_t(v) * s.lights + l] = 1;
+  s.skipped_images = int(std::count(skip.begin(), skip.end(), 1));
+  if (s.skipped_images > 0)
+    s.notes.push_back(fmt::format("{} of {} images are marked missing (not measured) and left out of every figure",
+                                  s.skipped_images, skip.size()));
 
   FindPeak(options, ref, reporter, rslot.data(), &s);
   Timer timer;
   const std::vector<ImageStats> stats =
-      MeasureImages(options, ref, test, reporter, s.peak, rslot.data(), tslot.data());
-  std::vector<ImageError> images = MergeImageStats(options, stats, &s);
+      MeasureImages(options, ref, test, skip, reporter, s.peak, rslot.data(), tslot.data());
+  std::vector<ImageError> images = MergeImageStats(options, stats, skip, &s);
   for (int v = 0; v < s.views; ++v) s.view_angles.push_back(ref.views().angles(v));
   for (int l = 0; l < s.lights; ++l) s.light_angles.push_back(ref.lights().angles(l));
   std::stable_sort(images.begin(), images.end(), [](const ImageError& a, const ImageError& b) { return a.rmse > b.rmse; });

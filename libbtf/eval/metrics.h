@@ -56,6 +56,9 @@ struct CompareSummary {
   // Why a figure is undefined or says less than it seems (all-zero reference; a few values
   // dominating the reference: ErrorStats::PeakDominance).
   std::vector<std::string> notes;
+  // Images left out because either input marks them missing (a dataset imported with
+  // --allow-missing): every figure is over the other images.
+  int skipped_images = 0;
   std::vector<double> view_rmse, light_rmse;
   std::vector<Angles> view_angles, light_angles;  // of the reference's samplings
   std::vector<ImageError> worst;             // worst images first

@@ -596,6 +596,7 @@ SweepSummary RunSweep(const SweepOptions& o, const std::filesystem::path& datase
                       const Reporter& reporter) {
   o.Check();
   Timer timer;
+  RequireEveryImage(DatasetReader(dataset_path).header(), "a sweep compresses and renders every image");
   const Dataset data = ReadDataset(dataset_path);
   const auto truth = MemorySource(data, dataset_path.string());
   // NaN/Inf refused up front with the item named (Compress would too, but only for the first method).

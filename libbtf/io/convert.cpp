@@ -21,6 +21,7 @@ void ConvertOptions::Check() const {
                        layout == "pattern",
                    "layout", "must be ubo2003, atrium, ubo2014-images or pattern");
   BTF_CHECK_OPTION(pattern.empty() == (layout != "pattern"), "pattern", "given with --layout pattern, and only then");
+  BTF_CHECK_OPTION(directions == "all" || directions == "present", "directions", "must be all or present");
 }
 
 nlohmann::json ConvertOptions::ToJson() const {
@@ -31,6 +32,7 @@ nlohmann::json ConvertOptions::ToJson() const {
           {"layout", layout},
           {"pattern", pattern},
           {"allow_missing", allow_missing},
+          {"directions", directions},
           {"view", view},
           {"light", light},
           {"exposure", exposure}};

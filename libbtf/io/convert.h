@@ -32,8 +32,12 @@ struct ConvertOptions {
   // {tl} {pl} (view and light theta and phi in degrees, each exactly once), e.g.
   // "tv{tv}_pv{pv}/tl{tl}_pl{pl}.exr".
   std::string pattern;
-  // Missing (view, light) images are written as 0 instead of refusing the set.
+  // Missing (view, light) images are written as 0 and marked missing in the dataset (format 1.1,
+  // /btf/missing) instead of refusing the set.
   bool allow_missing = false;
+  // Image sets: "all" (every direction of the layout's sampling) or "present" (only the views and
+  // lights that have at least one image: a partial download imports as the smaller set it is).
+  std::string directions = "all";
   // Image output ("png": 8-bit sRGB of exposure x value clamped to [0, 1], as the renders show
   // it; "exr": the linear values x exposure, float): the (view, light) image, indices into the
   // input's samplings.

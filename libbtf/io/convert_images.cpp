@@ -243,6 +243,31 @@ std::string MissingName(const std::string& layout, const Layout& named, const Sa
                      deg(li.phi), deg(vi.theta), deg(vi.phi), layout == "ubo2003" ? "jpg" : "hdr");
 }
 
+// --directions present: keeps the views and the lights that have at least one image (their order
+// kept), so that a partial set imports as the smaller set it is instead of zeros for the rest.
+void KeepPresentDirections(Sampling& views, Sampling& lights, std::vector<const Found*>& grid) {
+  const int V = views.size(), L = lights.size();
+  std::vector<int> vs, ls;
+  for (int v = 0; v < V; ++v)
+    for (int l = 0; l < L; ++l)
+      if (grid[std::size_t(v) * L + l]) {
+        vs.push_back(v);
+        break;
+      }
+  for (int l = 0; l < L; ++l)
+    for (int v = 0; v < V; ++v)
+      if (grid[std::size_t(v) * L + l]) {
+        ls.push_back(l);
+        break;
+      }
+  std::vector<const Found*> kept;
+  for (int v : vs)
+    for (int l : ls) kept.push_back(grid[std::size_t(v) * L + l]);
+  views = views.Subset(vs);
+  lights = lights.Subset(ls);
+  grid = std::move(kept);
+}
+
 }  // namespace
 
 ConvertSummary ImportImageSet(const ConvertOptions& options, const std::filesystem::path& folder,
@@ -266,9 +291,9 @@ ConvertSummary ImportImageSet(const ConvertOptions& options, const std::filesyst
   } else {
     views = lights = named.sampling;
   }
-  const int V = views.size(), L = lights.size();
-  std::vector<const Found*> grid(std::size_t(V) * L, nullptr);
+  std::vector<const Found*> grid(std::size_t(views.size()) * lights.size(), nullptr);
   for (const Found& f : found) {
+    const int L = lights.size();
     const int v = IndexIn(views, f.tv, f.pv, named.tolerance_deg), l = IndexIn(lights, f.tl, f.pl, named.tolerance_deg);
     if (v < 0 || l < 0)
       ThrowBadInput("'{}': {} direction (theta {}, phi {}) is not one of the {} directions {} names", f.name,
@@ -282,6 +307,8 @@ ConvertSummary ImportImageSet(const ConvertOptions& options, const std::filesyst
                     Describe(lights, l));
     slot = &f;
   }
+  if (options.directions == "present") KeepPresentDirections(views, lights, grid);
+  const int V = views.size(), L = lights.size();
   std::vector<std::string> missing;
   for (int v = 0; v < V; ++v)
     for (int l = 0; l < L; ++l)
@@ -290,7 +317,8 @@ ConvertSummary ImportImageSet(const ConvertOptions& options, const std::filesyst
                                   : MissingName(options.layout, named, lights, l, views, v));
   if (!missing.empty() && !options.allow_missing) {
     const std::size_t shown = std::min<std::size_t>(missing.size(), 3);
-    ThrowBadInput("'{}': {} of {} images are missing ({}{}); add them, or give --allow-missing to write them as 0",
+    ThrowBadInput("'{}': {} of {} images are missing ({}{}); add them, give --directions present to keep only the "
+                  "views and lights with images, or --allow-missing to mark them missing (written as 0)",
                   folder.string(), missing.size(), std::size_t(V) * L,
                   fmt::join(missing.begin(), missing.begin() + std::ptrdiff_t(shown), ", "),
                   missing.size() > shown ? ", ..." : "");
@@ -322,6 +350,7 @@ ConvertSummary ImportImageSet(const ConvertOptions& options, const std::filesyst
       const Found* f = grid[std::size_t(v) * L + l];
       if (!f) {
         w.WriteImage(v, l, zero.data());
+        w.MarkMissing(v, l);
         continue;
       }
       const Image img = files.Read(f->file, read);

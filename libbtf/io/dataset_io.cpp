@@ -12,6 +12,7 @@ namespace btf {
 
 namespace {
 constexpr const char* kData = "/btf/data";
+constexpr const char* kMissing = "/btf/missing";
 
 std::string JoinNames(const std::vector<std::string>& names) {
   std::string s;
@@ -97,6 +98,18 @@ DatasetHeader ReadHeader(const h5::File& f) {
     info.provenance = nlohmann::json::parse(f.ReadString("/provenance"), nullptr, false);
     if (info.provenance.is_discarded()) ThrowBadInput("'{}': '/provenance' is not valid JSON", f.path());
   }
+  if (f.Exists(kMissing)) {
+    const auto dims = f.Dims(kMissing);
+    if (dims.size() != 2 || dims[1] != 2 || dims[0] > hsize_t(h.num_views) * hsize_t(h.num_lights))
+      ThrowBadInput("'{}': '{}' must be a list of (view, light) pairs, at most one per image", f.path(), kMissing);
+    const std::vector<std::int32_t> pairs = f.ReadInts(kMissing);
+    for (std::size_t i = 0; i < pairs.size(); i += 2) {
+      if (pairs[i] < 0 || pairs[i] >= h.num_views || pairs[i + 1] < 0 || pairs[i + 1] >= h.num_lights)
+        ThrowBadInput("'{}': '{}' entry {} is (view {}, light {}), outside the {} x {} images", f.path(), kMissing, i / 2,
+                      pairs[i], pairs[i + 1], h.num_views, h.num_lights);
+      h.missing.emplace_back(pairs[i], pairs[i + 1]);
+    }
+  }
   return h;
 }
 
@@ -117,6 +130,7 @@ struct DatasetWriter::Impl {
   AtomicOutput out;
   h5::File file;
   int views, lights, height, width, channels;
+  std::vector<std::int32_t> missing;  // (view, light) pairs
   explicit Impl(const std::filesystem::path& p) : out(p) {}
 };
 
@@ -166,9 +180,28 @@ void DatasetWriter::WriteViewSlot(int view, const float* data) {
                         data);
 }
 
+void DatasetWriter::MarkMissing(int view, int light) {
+  impl_->missing.push_back(view);
+  impl_->missing.push_back(light);
+}
+
 void DatasetWriter::Commit() {
+  if (!impl_->missing.empty()) {
+    h5::File& f = impl_->file;
+    f.WriteInts(kMissing, {hsize_t(impl_->missing.size() / 2), 2}, impl_->missing.data());
+    f.SetAttr(kMissing, "meaning", std::string("(view, light) images not measured; their values are 0"));
+    f.SetAttr("/", "format_version", std::string(kDatasetFormatVersionMissing));
+  }
   impl_->file.Close();  // throws if the data did not all reach the file: nothing is committed
   impl_->out.Commit();
+}
+
+void RequireEveryImage(const DatasetHeader& h, const std::string& needs) {
+  if (h.missing.empty()) return;
+  ThrowBadInput("'{}' marks {} of {} images missing (first: view {}, light {}), and {}: import the set again with "
+                "--directions present (only the directions with images), or add the missing photos",
+                h.path, h.missing.size(), std::size_t(h.num_views) * h.num_lights, h.missing.front().first,
+                h.missing.front().second, needs);
 }
 
 void WriteDataset(const std::filesystem::path& path, const Dataset& d, const DatasetWriteOptions& options) {

@@ -2,6 +2,8 @@
 // The libbtf dataset file, format "libbtf-dataset" version 1 (normative: docs/format.md).
 #include <filesystem>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "libbtf/core/dataset.h"
 #include "libbtf/io/hdf5.h"
@@ -10,6 +12,8 @@ namespace btf {
 
 inline constexpr const char* kDatasetFormat = "libbtf-dataset";
 inline constexpr const char* kDatasetFormatVersion = "1.0.0";
+// Written by files that mark images missing (/btf/missing), the first version that has it.
+inline constexpr const char* kDatasetFormatVersionMissing = "1.1.0";
 inline constexpr int kDatasetFormatMajor = 1;
 
 struct DatasetWriteOptions {
@@ -34,7 +38,14 @@ struct DatasetHeader {
   int num_views = 0, num_lights = 0, height = 0, width = 0, channels = 0;
   Sampling views, lights;
   DatasetInfo info;
+  // (view, light) images the file marks missing (format 1.1, /btf/missing): their values are 0,
+  // not measurements. Empty: every image was measured.
+  std::vector<std::pair<int, int>> missing;
 };
+
+// Throws btf::Error (bad input) naming the file when it marks images missing; `needs` says what
+// needs every image (e.g. "rendering interpolates between all sampled directions").
+void RequireEveryImage(const DatasetHeader& header, const std::string& needs);
 
 // Writes atomically (temporary file + rename).
 void WriteDataset(const std::filesystem::path& path, const Dataset& dataset, const DatasetWriteOptions& options = {});
@@ -70,6 +81,8 @@ class DatasetWriter {
   ~DatasetWriter();
   void WriteImage(int view, int light, const float* data);
   void WriteViewSlot(int view, const float* data);
+  // Marks image (view, light) missing (write its values as 0): stored in /btf/missing at Commit.
+  void MarkMissing(int view, int light);
   void Commit();
 
  private:

@@ -72,7 +72,10 @@ nlohmann::json DescribeSampling(const Sampling& s) {
 nlohmann::json DescribeDatasetHeader(const DatasetHeader& h) {
   std::error_code ec;
   const auto bytes = std::filesystem::file_size(h.path, ec);
+  nlohmann::json missing = nlohmann::json::array();
+  for (const auto& [v, l] : h.missing) missing.push_back({{"view", v}, {"light", l}});
   return {{"path", h.path},
+          {"missing_images", missing},
           {"format", kDatasetFormat},
           {"format_version", h.format_version},
           {"creator", h.creator},

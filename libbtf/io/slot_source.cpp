@@ -57,6 +57,7 @@ class FileSlotSource final : public SlotSource {
   DatasetInfo info() const override { return reader_.header().info; }
   void ReadViewSlot(int view, float* out) const override { reader_.ReadViewSlot(view, out); }
   void ReadImage(int view, int light, float* out) const override { reader_.ReadImage(view, light, out); }
+  std::vector<std::pair<int, int>> missing() const override { return reader_.header().missing; }
 
  private:
   DatasetReader reader_;

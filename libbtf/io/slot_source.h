@@ -32,6 +32,9 @@ class SlotSource {
   virtual const float* ViewSlotData(int view) const { return nullptr; }
   // height x width x channels floats (default: reads the view slot and copies one image).
   virtual void ReadImage(int view, int light, float* out) const;
+  // (view, light) images the source marks missing (a dataset file's /btf/missing): their values
+  // are 0, not measurements. Default: none.
+  virtual std::vector<std::pair<int, int>> missing() const { return {}; }
 
   std::size_t image_size() const { return std::size_t(height()) * width() * channels(); }
   std::size_t slot_size() const { return image_size() * std::size_t(lights().size()); }

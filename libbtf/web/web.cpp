@@ -236,6 +236,7 @@ CpuRenderSummary RenderCpu(const std::filesystem::path& source, const RenderOpti
       img = Render(*CodecEvaluator(codec), scene);
       s.source_kind = "codec";
     } else if (format == kDatasetFormat) {
+      RequireEveryImage(DatasetReader(source).header(), "rendering interpolates between all sampled directions");
       const Dataset d = ReadDataset(source);
       img = Render(*DatasetEvaluator(d), scene);
       s.source_kind = "dataset";

@@ -91,7 +91,10 @@ int main(int argc, char** argv) {
   app.add_option("--pattern", o.pattern,
                  "--layout pattern: image path relative to the folder (or zip) with fields {tv} {pv} {tl} {pl} (degrees), e.g. "
                  "'tv{tv}_pv{pv}/tl{tl}_pl{pl}.exr'");
-  app.add_flag("--allow-missing", o.allow_missing, "Image sets: write missing (view, light) images as 0 instead of failing");
+  app.add_flag("--allow-missing", o.allow_missing,
+               "Image sets: mark missing (view, light) images missing in the dataset (values 0) instead of failing");
+  app.add_option("--directions", o.directions,
+                 "Image sets: all (the layout's whole sampling) or present (only the views and lights with images)");
   app.add_option("--components,-c", f.fmf.components,
                  "FMF/DFMF output: components of the truncated SVD (per YUV channel for DFMF); clamped to the rank");
   app.add_option("--power-iterations", f.fmf.power_iterations, "FMF/DFMF output: power iterations of the randomised SVD");
