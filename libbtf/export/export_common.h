@@ -5,12 +5,14 @@
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
+#include <string>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 
 #include "libbtf/compress/codec.h"
 #include "libbtf/core/atomic_file.h"
+#include "libbtf/export/export_reader.h"
 #include "libbtf/io/half.h"
 
 namespace btf::export_detail {
@@ -43,6 +45,18 @@ class NormalisedStore {
   std::vector<std::uint8_t> u8_;
   std::vector<std::uint16_t> f16_;
 };
+
+// "checksums" of the manifest: the CRC-32 of every file written so far into `dir` (all but the
+// manifest), by name (export_reader.h VerifyExportChecksums checks them).
+inline nlohmann::json ExportChecksums(const std::filesystem::path& dir) {
+  std::vector<std::string> names;
+  for (const auto& e : std::filesystem::directory_iterator(dir))
+    if (e.is_regular_file() && e.path().filename() != "manifest.json") names.push_back(e.path().filename().string());
+  std::sort(names.begin(), names.end());
+  nlohmann::json files = nlohmann::json::object();
+  for (const std::string& n : names) files[n] = FileCrc32(dir / n);
+  return {{"algorithm", "crc32"}, {"files", files}};
+}
 
 inline std::string WebGlFormat(bool half, int channels) {
   return half ? (channels == 1 ? "R16F / RED / HALF_FLOAT" : "RGB16F / RGB / HALF_FLOAT")

@@ -231,8 +231,9 @@ SattlerExportSummary ExportSattler(const SattlerExportOptions& o, const Codec& c
   s.weight_bytes = WriteBinary(dir / "terms.f32", terms);
   WriteBinary(dir / "scale_bias.f32", scale_bias);
 
-  const nlohmann::json j = SattlerManifest(o, codec, atlas, F, images_file);
+  nlohmann::json j = SattlerManifest(o, codec, atlas, F, images_file);
   WriteTextFileAtomic(dir / "btf_sattler.glsl", SattlerGlsl(j));
+  j["checksums"] = export_detail::ExportChecksums(dir);
   WriteTextFileAtomic(dir / "manifest.json", j.dump(2) + "\n");
   output.Commit();
   s.times.Add("write", timer.Seconds());

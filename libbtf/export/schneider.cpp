@@ -261,8 +261,9 @@ SchneiderExportSummary ExportSchneider(const SchneiderExportOptions& o, const Co
   s.index_bytes = WriteBinary(dir / "cluster_index.u16", index);
   WriteBinary(dir / "scale_bias.f32", scale_bias);
 
-  const nlohmann::json j = SchneiderManifest(o, codec, atlas, K, F, atlas_file);
+  nlohmann::json j = SchneiderManifest(o, codec, atlas, K, F, atlas_file);
   WriteTextFileAtomic(dir / "btf_schneider.glsl", SchneiderGlsl(j));
+  j["checksums"] = export_detail::ExportChecksums(dir);
   WriteTextFileAtomic(dir / "manifest.json", j.dump(2) + "\n");
   output.Commit();
   s.times.Add("write", timer.Seconds());

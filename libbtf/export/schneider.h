@@ -31,8 +31,9 @@ namespace btf {
 
 inline constexpr const char* kSchneiderExportFormat = "libbtf-schneider-export";
 // 2.1.0 added "layout": kSchneiderLayout (LPCA, this file) or kSattlerLayout (pca-view,
-// libbtf/export/sattler.h); a 2.0.0 manifest without it is the Schneider layout.
-inline constexpr const char* kSchneiderExportVersion = "2.1.0";
+// libbtf/export/sattler.h); a 2.0.0 manifest without it is the Schneider layout. 2.2.0 added
+// "checksums" (CRC-32 of every file, checked by the readers).
+inline constexpr const char* kSchneiderExportVersion = "2.2.0";
 inline constexpr const char* kSchneiderLayout = "schneider-2004";
 inline constexpr const char* kSattlerLayout = "sattler-2003";
 

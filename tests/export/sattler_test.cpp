@@ -93,7 +93,7 @@ TEST(SattlerExport, ManifestAndFilesFollowTheLayout) {
   const SattlerExportSummary s = ExportSattler({}, PcaViewCodec(4), dir);
   std::ifstream in(dir / "manifest.json");
   const auto j = nlohmann::json::parse(in);
-  EXPECT_EQ(j["format_version"], "2.1.0");
+  EXPECT_EQ(j["format_version"], "2.2.0");
   EXPECT_EQ(j["layout"], "sattler-2003");
   EXPECT_EQ(j["views"]["directions"].size(), 19u);
   // 19 views x 5 images of 5 x 6 texels: 51 tiles per row of 256, one layer.

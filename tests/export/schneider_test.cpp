@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <set>
 
 #include "libbtf/core/error.h"
 #include "libbtf/export/schneider_reference_decoder.h"
@@ -123,7 +124,7 @@ TEST(SchneiderExport, FilesHaveTheManifestShapes) {
   std::ifstream in(dir / "manifest.json");
   const auto j = nlohmann::json::parse(in);
   EXPECT_EQ(j["format"], "libbtf-schneider-export");
-  EXPECT_EQ(j["format_version"], "2.1.0");
+  EXPECT_EQ(j["format_version"], "2.2.0");
   EXPECT_EQ(j["layout"], "schneider-2004");
   const auto shape = j["atlas"]["shape"];
   std::uint64_t n = 1;
@@ -141,6 +142,45 @@ TEST(SchneiderExport, FilesHaveTheManifestShapes) {
   // A truncated file is refused by the reference decoder.
   std::filesystem::resize_file(dir / "terms.f32", 8);
   EXPECT_THROW(SchneiderReferenceDecoder{dir}, Error);
+}
+
+// Every file of an export carries its CRC-32 in the manifest: a flipped bit anywhere in any of
+// them (each byte of each file in turn) is refused by the reference decoder naming the file; the
+// intact export reads.
+TEST(SchneiderExport, AFlippedBitInAnyFileIsRefused) {
+  const auto dir = test::TempDir() / "export";
+  ExportSchneider({}, SmallLpca(), dir);
+  const nlohmann::json j = nlohmann::json::parse(std::ifstream(dir / "manifest.json"));
+  ASSERT_EQ(j["checksums"]["algorithm"], "crc32");
+  std::set<std::string> listed;
+  for (const auto& [name, crc] : j["checksums"]["files"].items()) listed.insert(name);
+  EXPECT_EQ(listed, (std::set<std::string>{"atlas.u8", "btf_schneider.glsl", "cluster_index.u16", "scale_bias.f32",
+                                           "terms.f32"}));
+  EXPECT_NO_THROW(SchneiderReferenceDecoder{dir});
+  int refused = 0, flips = 0;
+  for (const std::string& name : listed) {
+    std::string bytes = test::Slurp(dir / name);
+    for (std::size_t i = 0; i < bytes.size(); ++i) {
+      bytes[i] = char(bytes[i] ^ (1 << (i % 8)));
+      std::ofstream(dir / name, std::ios::binary | std::ios::trunc) << bytes;
+      ++flips;
+      try {
+        SchneiderReferenceDecoder ref(dir);
+      } catch (const Error& e) {
+        refused += std::string(e.what()).find(name) != std::string::npos;
+      }
+      bytes[i] = char(bytes[i] ^ (1 << (i % 8)));
+    }
+    std::ofstream(dir / name, std::ios::binary | std::ios::trunc) << bytes;
+  }
+  EXPECT_EQ(refused, flips);
+  EXPECT_NO_THROW(SchneiderReferenceDecoder{dir});
+}
+
+// The checksum is zlib's CRC-32 (docs/format.md): its standard check value.
+TEST(SchneiderExport, ChecksumIsTheStandardCrc32) {
+  const std::string check = "123456789";
+  EXPECT_EQ(export_detail::Crc32(reinterpret_cast<const unsigned char*>(check.data()), check.size()), 0xCBF43926u);
 }
 
 TEST(SchneiderExport, RefusesAtlasDepthOverTheLimit) {
