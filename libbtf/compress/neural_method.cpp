@@ -86,6 +86,7 @@ NeuralSamples DrawSamples(const MethodContext& ctx) {
     if (v < V) {
       ctx.reporter.Progress(std::size_t(v), std::size_t(V), "neural samples");
       in.ReadViewSlot(v, slot.data());
+      CheckFiniteSlot(in, v, slot.data());  // names the file and the slot (the log keeps an Inf)
       ctx.transform.Apply(in.name(), v, slot.data(), slot.size());
       AppendSlotSamples(ctx, v, slot, out);
     }

@@ -188,7 +188,8 @@ TEST(Distributed, DfmfCodecIsTheSameForOneToFourRanks) {
 // 1-4 ranks: uneven shares) and all gather the set; training is data-parallel over the 6 blocks
 // of 256 samples of each step (split 6, 3+3, 2+2+2, 1+2+1+2 over the ranks), the gradients
 // gathered and summed in block order. The decoder, the latents (as trained and as stored) and every
-// figure of the summary, the losses included, are bit-identical to the one process's.
+// figure of the summary, the losses included, are bit-identical to the one process's (which runs
+// with the default OpenMP threads, the ranks with one each).
 TEST(Distributed, NeuralCodecIsTheSameForOneToFourRanks) {
   REQUIRE_MPI();
   const fs::path dir = test::TempDir();
@@ -207,6 +208,13 @@ TEST(Distributed, NeuralCodecIsTheSameForOneToFourRanks) {
     EXPECT_TRUE(x.latents == y.latents) << ranks << " ranks";
     EXPECT_TRUE(x.net.parameters() == y.net.parameters()) << ranks << " ranks";
   }
+}
+
+// neural: the rank that draws the samples of the damaged view slot reports it (exit 3, its rank
+// and the file named) while rank 0 waits in the gather; no codec appears.
+TEST(Distributed, NeuralRankThatReadsADamagedSlotEndsTheJob) {
+  REQUIRE_MPI();
+  ExpectDamagedSlotEndsTheJob("neural", 5);
 }
 
 // btf-convert --to fmf | dfmf factorises with the same distributed SVD; rank 0 writes the Bonn
