@@ -183,6 +183,33 @@ class Source {
   const btf::CodecSource* codec_;  // source_ when the file is a codec, else nullptr
 };
 
+// A neural codec's decoder and latents (docs/format.md, "Neural"), read-only views as below:
+// `latents` (H, W, c), the stored latents as float (what decodes); per layer n `weights`[n]
+// (out_n, in_n) and `biases`[n] (out_n,).
+py::dict NeuralCoefficients(const py::object& self, const btf::Codec& c, py::dict d) {
+  const btf::NeuralCodecModel& m = c.neural();
+  auto frozen = [](py::array_t<float> a) {
+    a.attr("setflags")(py::arg("write") = false);
+    return a;
+  };
+  const py::ssize_t H = c.height(), W = c.width(), k = m.latent, f = sizeof(float);
+  d["latents"] = frozen(py::array_t<float>({H, W, k}, m.latents.data(), self));
+  py::list weights, biases;
+  for (int l = 0; l < m.net.layers(); ++l) {
+    const auto w = m.net.weight(l);  // column-major out x in
+    const py::ssize_t out = w.rows(), in = w.cols();
+    weights.append(frozen(py::array_t<float>({out, in}, {f, f * out}, w.data(), self)));
+    biases.append(frozen(py::array_t<float>({out}, m.net.bias(l).data(), self)));
+  }
+  d["weights"] = weights;
+  d["biases"] = biases;
+  d["activation"] = std::string(btf::ActivationName(m.net.shape().activation));
+  d["half_vector"] = m.encoding.half_vector;
+  d["fourier"] = m.encoding.fourier;
+  d["latent_storage"] = btf::LatentStorageName(m.storage);
+  return d;
+}
+
 // A codec's stored coefficients as read-only NumPy arrays over the Codec's own memory (no copy);
 // each array keeps the Source `self` alive. Layouts: libbtf/compress/codec.h, docs/format.md.
 py::dict Coefficients(const py::object& self) {
@@ -201,6 +228,10 @@ py::dict Coefficients(const py::object& self) {
   d["method"] = btf::MethodName(c.method());
   d["transform"] = c.transform() == btf::ValueTransform::kLog ? "log" : "none";
   d["log_epsilon"] = c.log_epsilon();
+  if (c.method() == btf::CodecMethod::kNeural) return NeuralCoefficients(self, c, d);
+  if (c.method() != btf::CodecMethod::kPcaView && c.method() != btf::CodecMethod::kLpca)
+    btf::ThrowUsage("'{}': coefficients() reads pca-view, lpca and neural codecs, not {}", src.path().string(),
+                    btf::MethodName(c.method()));
   if (c.method() == btf::CodecMethod::kPcaView) {
     py::list slots;
     for (const btf::PcaViewSlot& s : c.pca_view()) {
@@ -325,6 +356,15 @@ auto CompressKeywords() {
       Member("lpca_sample", [](auto& o) -> auto& { return o.lpca.sample; }),
       Member("lpca_splits", [](auto& o) -> auto& { return o.lpca.splits; }),
       Member("lpca_matrix", [](auto& o) -> auto& { return o.lpca.matrix; }),
+      Member("neural_latent", [](auto& o) -> auto& { return o.neural.latent; }),
+      Member("neural_hidden", [](auto& o) -> auto& { return o.neural.hidden; }),
+      Member("neural_fourier", [](auto& o) -> auto& { return o.neural.fourier; }),
+      Member("neural_latent_storage", [](auto& o) -> auto& { return o.neural.latent_storage; }),
+      Member("neural_samples", [](auto& o) -> auto& { return o.neural.samples; }),
+      Member("neural_steps", [](auto& o) -> auto& { return o.neural.steps; }),
+      Member("neural_epochs", [](auto& o) -> auto& { return o.neural.epochs; }),
+      Member("neural_batch", [](auto& o) -> auto& { return o.neural.batch; }),
+      Member("neural_lr", [](auto& o) -> auto& { return o.neural.learning_rate; }),
       // The path of a scene.json (SceneSpec::Load); a default CompressOptions has no scene: None.
       Converted<Path>(
           "scene", [](const CompressOptions&) { return Path(); },

@@ -233,6 +233,76 @@ def test_compress_matches_btf_compress(data):
     assert half["storage"] == "half" and 0 < s["codec_bytes"] < half["codec_bytes"]
 
 
+# The neural codec's options: keyword -> the btf-compress flag with the same value.
+NEURAL = dict(neural_latent=4, neural_hidden=[16, 8], neural_fourier=1, neural_latent_storage="half",
+              neural_samples=3000, neural_steps=60, neural_epochs=3, neural_batch=512, neural_lr=0.02)
+
+
+def neural_flags(**kw):
+    out = []
+    for k, v in kw.items():
+        out += ["--" + k.replace("_", "-"), ",".join(map(str, v)) if isinstance(v, list) else v]
+    return out
+
+
+def silu(z):
+    return z / (1 + np.exp(-z))
+
+
+def test_neural_compress_decode_and_coefficients(data):
+    d = data["dir"]
+    s = libbtf.compress(data["gt"], d / "neural.h5", method="neural", seed=3, **NEURAL)
+    t = tool_json("btf-compress", data["gt"], "--method", "neural", "--seed", 3, *neural_flags(**NEURAL),
+                  "-o", d / "neural_tool.h5")
+    # Every keyword reached the library as the tool's flag does: the same training and the same codec.
+    assert s["method"] == "neural" and s["storage"] == "half" and s["latent_components"] == [4]
+    assert s["neural"]["samples"] == 3000 and s["neural"]["steps"] == 60 and s["neural"]["hidden"] == [16, 8]
+    for k in ("neural", "codec_bytes", "rmse", "relative_error"):
+        assert s[k] == t[k], k
+    assert s["neural"]["last_loss"] < s["neural"]["first_loss"]
+    codec = libbtf.open(d / "neural.h5")
+    values = codec.read_all()  # Codec::DecodeViewSlot
+    np.testing.assert_array_equal(values, libbtf.open(d / "neural_tool.h5").read_all())
+    tool("btf-compress", "decode", d / "neural.h5", "-o", d / "neural_decoded.h5", "-q")
+    np.testing.assert_array_equal(values, libbtf.open(d / "neural_decoded.h5").read_all())
+    # decode() at texel centres and sampled directions, nearest texel: the decoder evaluated at the
+    # same inputs in batches of other sizes (float rounding, 1e-4 relative).
+    views, lights = codec.views["directions"], codec.lights["directions"]
+    vv, ll, yy, xx = np.meshgrid(range(len(VIEWS)), range(len(LIGHTS)), range(N), range(N), indexing="ij")
+    vv, ll, yy, xx = (a.ravel() for a in (vv, ll, yy, xx))
+    uv = np.stack([(xx + 0.5) / N, 1 - (yy + 0.5) / N], axis=1)
+    got = codec.decode(uv, lights[ll], views[vv], filter="nearest")
+    np.testing.assert_allclose(got, values[vv, ll, yy, xx], rtol=1e-4, atol=1e-6)
+    # Anywhere on the hemisphere, bilinear: finite values above -epsilon.
+    rng = np.random.default_rng(2)
+    wi, wo = rng.normal(size=(50, 3)), rng.normal(size=(50, 3))
+    wi[:, 2], wo[:, 2] = np.abs(wi[:, 2]) + 0.2, np.abs(wo[:, 2]) + 0.2
+    between = codec.decode(rng.uniform(size=(50, 2)), wi, wo)
+    assert np.all(np.isfinite(between)) and np.all(between > -1.0001e-3)
+    # coefficients(): the decoder of docs/format.md ("Neural") evaluated in NumPy gives the decoded
+    # values (float32 arithmetic in C++, float64 here: 1e-4 relative).
+    co = codec.coefficients()
+    assert co["method"] == "neural" and co["transform"] == "log" and co["activation"] == "silu"
+    assert co["latents"].shape == (N, N, 4) and not co["latents"].flags.writeable
+    assert [w.shape for w in co["weights"]] == [(16, 4 + 6 + 8), (8, 16), (3, 8)]
+    wi, wo = lights[ll], views[vv]
+    wi, wo = wi / np.linalg.norm(wi, axis=1)[:, None], wo / np.linalg.norm(wo, axis=1)[:, None]
+    h = wi + wo
+    h /= np.linalg.norm(h, axis=1)[:, None]
+    base = np.stack([wi[:, 0], wi[:, 1], wo[:, 0], wo[:, 1]], axis=1)
+    fourier = np.stack([f(np.pi * base) for f in (np.sin, np.cos)], axis=2).reshape(len(vv), 8)
+    a = np.concatenate([co["latents"][yy, xx], base, h[:, :2], fourier], axis=1).astype(np.float64)
+    for n, (w, b) in enumerate(zip(co["weights"], co["biases"])):
+        a = a @ w.T.astype(np.float64) + b
+        if n + 1 < len(co["weights"]):
+            a = silu(a)
+    np.testing.assert_allclose(np.exp(a) - co["log_epsilon"], values[vv, ll, yy, xx], rtol=1e-4, atol=1e-6)
+    expect_error("usage", 2, "invalid option 'neural_hidden'", libbtf.compress, data["gt"], d / "x.h5",
+                 method="neural", neural_hidden=[8, 0])
+    expect_error("usage", 2, "not fmf", libbtf.open(libbtf.compress(data["gt"], d / "fmf.h5", method="fmf",
+                                                                    components=2)["output"]).coefficients)
+
+
 def test_compare_matches_btf_eval(data):
     tool_summary = tool_json("btf-eval", "compare", data["gt"], data["lpca"])
     by_path = libbtf.compare(data["gt"], data["lpca"])

@@ -131,7 +131,7 @@ void ExpectCompressionIndependentOfRanks(const std::string& input, const std::st
     EXPECT_EQ(got.value("per_rank", nlohmann::json::array()).size(), std::size_t(ranks));
     for (const char* key : {"rmse", "relative_error", "max_abs_error", "psnr_db", "codec_bytes", "components",
                             "slot_components", "cluster_components", "iteration_relative_errors",
-                            "iteration_reassigned_texels", "warnings"})
+                            "iteration_reassigned_texels", "warnings", "latent_components", "neural"})
       if (want.contains(key)) {  // compared as text: doubles printed with every digit
         EXPECT_EQ(got.value(key, nlohmann::json()).dump(), want[key].dump()) << key << " with " << ranks << " ranks";
       }
@@ -182,6 +182,39 @@ TEST(Distributed, DfmfCodecIsTheSameForOneToFourRanks) {
   const fs::path dir = test::TempDir();
   const std::string in = SynthInput(dir, " btf --views 0-12 --lights 0-6 --resolution 24 --samples 1");
   ExpectCompressionIndependentOfRanks(in, " --method dfmf --components 5 --seed 2", dir);
+}
+
+// btf-compress --method neural: each rank draws the samples of the view slots it owns (13 over
+// 1-4 ranks: uneven shares) and all gather the set; training is data-parallel over the 6 blocks
+// of 256 samples of each step (split 6, 3+3, 2+2+2, 1+2+1+2 over the ranks), the gradients
+// gathered and summed in block order. The decoder, the latents (as trained and as stored) and every
+// figure of the summary, the losses included, are bit-identical to the one process's (which runs
+// with the default OpenMP threads, the ranks with one each).
+TEST(Distributed, NeuralCodecIsTheSameForOneToFourRanks) {
+  REQUIRE_MPI();
+  const fs::path dir = test::TempDir();
+  const std::string in = SynthInput(dir, " btf --views 0-12 --lights 0-6 --resolution 16 --samples 1");
+  ExpectCompressionIndependentOfRanks(in,
+                                      " --method neural --neural-latent 4 --neural-hidden 16,16 --neural-samples 6000 "
+                                      "--neural-batch 1536 --neural-steps 40 --seed 7",
+                                      dir);
+  const Codec ref = ReadCodec(dir / "serial.h5");
+  ASSERT_EQ(ref.method(), CodecMethod::kNeural);
+  for (int ranks = 1; ranks <= 4; ++ranks) {
+    const Codec got = ReadCodec(dir / fmt::format("ranks{}.h5", ranks));
+    const NeuralCodecModel &x = ref.neural(), &y = got.neural();
+    EXPECT_EQ(y.latent, 4);
+    EXPECT_TRUE(x.codes == y.codes && x.scale == y.scale && x.bias == y.bias) << ranks << " ranks";
+    EXPECT_TRUE(x.latents == y.latents) << ranks << " ranks";
+    EXPECT_TRUE(x.net.parameters() == y.net.parameters()) << ranks << " ranks";
+  }
+}
+
+// neural: the rank that draws the samples of the damaged view slot reports it (exit 3, its rank
+// and the file named) while rank 0 waits in the gather; no codec appears.
+TEST(Distributed, NeuralRankThatReadsADamagedSlotEndsTheJob) {
+  REQUIRE_MPI();
+  ExpectDamagedSlotEndsTheJob("neural", 5);
 }
 
 // btf-convert --to fmf | dfmf factorises with the same distributed SVD; rank 0 writes the Bonn

@@ -38,9 +38,9 @@ int RunCompress(const CLI::App& app, const btf::cli::CommonFlags& common, Compre
   f.options.storage = btf::ParseStorage(f.storage);
   btf::CheckOutput(f.output, {f.dataset, f.scene});
   if (!f.scene.empty()) f.options.scene = btf::SceneSpec::Load(f.scene);
-  // pca-view, lpca, fmf and dfmf split their work over MPI ranks (docs/scaling.md); rank 0 alone writes.
-  if (f.options.method == btf::CodecMethod::kLpcaTensor || f.options.method == btf::CodecMethod::kNeural)
-    btf::cli::RequireSingleRank("btf-compress --method " + f.method);
+  // pca-view, lpca, fmf, dfmf and neural split their work over MPI ranks (docs/scaling.md); rank 0
+  // alone writes.
+  if (f.options.method == btf::CodecMethod::kLpcaTensor) btf::cli::RequireSingleRank("btf-compress --method " + f.method);
   // Claim the output before the work: an unwritable folder fails now, not after the compression.
   std::optional<btf::AtomicOutput> target;
   if (btf::cli::PrintingRank()) target.emplace(f.output, btf::AtomicOutput::kReserve);
