@@ -215,7 +215,7 @@ SchneiderExportSummary ExportSchneider(const SchneiderExportOptions& o, const Co
   o.Check();
   if (codec.method() != CodecMethod::kLpca)
     ThrowUsage("the schneider export needs an LPCA codec; this one is '{}' (compress with --method lpca; a pca-view "
-               "codec exports with --format sattler)",
+               "codec exports with --format sattler, a neural codec with --format neural)",
                MethodName(codec.method()));
   if (codec.transform() != ValueTransform::kNone)
     ThrowUsage("the schneider export needs a codec without value transform (the renderer sums weighted "
