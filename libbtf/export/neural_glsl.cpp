@@ -130,11 +130,17 @@ uniform highp sampler2D btf_decoder;
 
 float btf_act(float z) {{ return {act}; }}  // {act_name}
 
-// (sin, cos) of pi m: m reduced modulo 2 first (exact in float32), so that the argument stays
-// below 2 pi whatever the octave.
+// (sin, cos) of pi m without GLSL's sin and cos, whose precision ES 3.00 leaves open (SwiftShader's
+// moved the decoder outputs by 4e-4): m = q / 2 + t with q an integer and t in [-1/4, 1/4] (exact
+// in float32), Taylor polynomials of sin and cos of pi t (truncation below 2e-9), then the
+// quarter turns q mod 4.
 vec2 btf_sincos_pi(float m) {{
-  float r = m - 2.0 * floor(0.5 * m);
-  return vec2(sin(BTF_PI * r), cos(BTF_PI * r));
+  float q = floor(2.0 * m + 0.5);
+  float x = BTF_PI * (m - 0.5 * q), x2 = x * x;
+  float s = x * (1.0 + x2 * (-1.0 / 6.0 + x2 * (1.0 / 120.0 + x2 * (-1.0 / 5040.0 + x2 * (1.0 / 362880.0)))));
+  float c = 1.0 + x2 * (-0.5 + x2 * (1.0 / 24.0 + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40320.0 + x2 * (-1.0 / 3628800.0)))));
+  int k = int(q - 4.0 * floor(0.25 * q));
+  return k == 0 ? vec2(s, c) : k == 1 ? vec2(c, -s) : k == 2 ? vec2(-s, -c) : vec2(-c, s);
 }}
 
 vec3 btf_eval(vec2 uv, vec3 wi, vec3 wo) {{
