@@ -1,5 +1,5 @@
 // libbtf WebGL2 viewer (docs/viewer.md): loads a renderer export (/export/manifest.json and its
-// files, btf_schneider.glsl or btf_sattler.glsl included) and draws a plane or a cylinder under a point light or a
+// files, btf_schneider.glsl, btf_sattler.glsl or btf_neural.glsl included) and draws a plane or a cylinder under a point light or a
 // sampled sky. The surface point of each pixel is the analytic intersection of the pixel's ray
 // (camera -> rasterised proxy fragment) with the shape, as in the CPU renderer
 // (libbtf/eval/render.cpp), so both draw the same (uv, wi, wo) per pixel: the ray is built from
@@ -40,13 +40,15 @@ const defaultScene = {
 };
 
 // Export textures (docs/viewer.md, "Binding the textures"): layout schneider-2004 (LPCA, a 3D
-// atlas) or sattler-2003 (pca-view, a 2D texture array of per-view images).
+// atlas), sattler-2003 (pca-view, a 2D texture array of per-view images) or neural-mlp (neural:
+// a 2D texture array of latents and a texture of decoder weights).
 async function loadExport(base) {
   const m = await fetchJson(`${base}manifest.json`);
   if (m.format !== 'libbtf-schneider-export' || !String(m.format_version).startsWith('2.'))
     throw new Error(`unsupported export: ${m.format} ${m.format_version} (the viewer reads 2.x)`);
   const layout = m.layout || 'schneider-2004';
   if (layout === 'sattler-2003') return loadSattler(base, m);
+  if (layout === 'neural-mlp') return loadNeural(base, m);
   if (layout !== 'schneider-2004') throw new Error(`unsupported export layout '${layout}'`);
   const a = m.atlas, W = m.texture.width, H = m.texture.height, C = m.texture.channels;
   const F = m.functions.count_per_cluster, NT = F + 1, NT4 = Math.ceil(NT / 4);
@@ -80,6 +82,26 @@ async function loadSattler(base, m) {
   const glsl = await fetchText(base + m.glsl.file);
   const info = `${V} views x ${F} images, ${L} lights, texture array ${im.width}x${im.height}x${im.layers} ${im.storage}`;
   return { manifest: m, glsl, uniforms: { btf_images: { value: valueTexture(t, im.storage) }, btf_terms: { value: termsTex } }, info };
+}
+
+// neural-mlp: latents.u8 / latents.f16 ([layers][H][W][4], already RGBA) as a 2D texture array,
+// decoder.f32 as an RGBA32F texture with one row per neuron (its weights, then its bias).
+async function loadNeural(base, m) {
+  const lt = m.latents, W = m.texture.width, H = m.texture.height, dec = m.decoder;
+  const src = await loadValues(base, lt.file, lt.storage, lt.layers * H * W * 4);
+  const t = new THREE.DataArrayTexture(src, W, H, lt.layers);
+  t.minFilter = t.magFilter = THREE.NearestFilter;
+  const weights = new Float32Array(await fetchBytes(base + dec.file));
+  if (weights.length !== dec.parameters) throw new Error(`${dec.file}: ${weights.length} values, expected ${dec.parameters}`);
+  const TW = dec.texture.width, TH = dec.texture.height, data = new Float32Array(TW * TH * 4);
+  for (const l of dec.layers)
+    for (let o = 0; o < l.outputs; ++o)
+      data.set(weights.subarray(l.offset + o * (l.inputs + 1), l.offset + (o + 1) * (l.inputs + 1)), (l.first_row + o) * TW * 4);
+  const glsl = await fetchText(base + m.glsl.file);
+  const hidden = dec.layers.slice(0, -1).map((l) => l.outputs).join(',') || '-';
+  const info = `${lt.count} latents (${lt.storage}), decoder ${dec.inputs} -> ${hidden} -> ${m.texture.channels} (${dec.parameters} parameters)`;
+  return { manifest: m, glsl, info,
+           uniforms: { btf_latents: { value: valueTexture(t, lt.storage) }, btf_decoder: { value: dataTexture(data, TW, TH, THREE.RGBAFormat) } } };
 }
 
 async function loadValues(base, file, storage, count) {

@@ -56,7 +56,7 @@ struct SattlerAtlas {
 void CheckSattlerCodec(const SattlerExportOptions& o, const Codec& codec) {
   if (codec.method() != CodecMethod::kPcaView)
     ThrowUsage("the sattler export needs a pca-view codec; this one is '{}' (compress with --method pca-view, or "
-               "export an lpca codec with --format schneider)",
+               "export an lpca codec with --format schneider, a neural codec with --format neural)",
                MethodName(codec.method()));
   if (codec.transform() != ValueTransform::kNone)
     ThrowUsage("the sattler export needs a codec without value transform (the renderer sums weighted images "

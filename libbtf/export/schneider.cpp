@@ -218,7 +218,7 @@ SchneiderExportSummary ExportSchneider(const SchneiderExportOptions& o, const Co
   if (codec.method() == CodecMethod::kLpcaTensor) return ExportSchneider(o, ExpandToLpcaCodec(codec), out_dir, rep);
   if (codec.method() != CodecMethod::kLpca)
     ThrowUsage("the schneider export needs an LPCA (or lpca-tensor) codec; this one is '{}' (compress with --method "
-               "lpca; a pca-view codec exports with --format sattler)",
+               "lpca; a pca-view codec exports with --format sattler, a neural codec with --format neural)",
                MethodName(codec.method()));
   if (codec.transform() != ValueTransform::kNone)
     ThrowUsage("the schneider export needs a codec without value transform (the renderer sums weighted "

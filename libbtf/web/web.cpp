@@ -17,6 +17,8 @@
 
 #include "libbtf/core/atomic_file.h"
 #include "libbtf/core/error.h"
+#include "libbtf/export/neural.h"
+#include "libbtf/export/neural_reference_decoder.h"
 #include "libbtf/export/sattler_reference_decoder.h"
 #include "libbtf/export/schneider.h"
 #include "libbtf/export/schneider_reference_decoder.h"
@@ -197,13 +199,14 @@ nlohmann::json ViewerSceneJson(const RenderOptions& o, double exposure) {
 
 namespace {
 
-// An export folder (either layout) as a BtfEvaluator through its reference decoder (nearest texel
+// An export folder (any layout) as a BtfEvaluator through its reference decoder (nearest texel
 // for uv, as DatasetEvaluator).
 std::unique_ptr<BtfEvaluator> OpenExportEvaluator(const std::filesystem::path& dir) {
   std::ifstream in(dir / "manifest.json");
   const nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
-  if (!j.is_discarded() && j.is_object() && j.value("layout", "") == kSattlerLayout)
-    return std::make_unique<ExportBtfEvaluator<SattlerReferenceDecoder>>(dir);
+  const std::string layout = !j.is_discarded() && j.is_object() ? j.value("layout", "") : "";
+  if (layout == kSattlerLayout) return std::make_unique<ExportBtfEvaluator<SattlerReferenceDecoder>>(dir);
+  if (layout == kNeuralLayout) return std::make_unique<ExportBtfEvaluator<NeuralReferenceDecoder>>(dir);
   return std::make_unique<ExportBtfEvaluator<SchneiderReferenceDecoder>>(dir);  // its errors name what is wrong
 }
 

@@ -1,6 +1,6 @@
-// Issue 17 "done when": the WebGL2 viewer in headless Chromium (Debian's chromium, software WebGL2
-// through SwiftShader) against the CPU renderer and the C++ reference decoder, on a small twill
-// LPCA export and a pca-view export of the same twill. Skips only when Chromium is absent (./run installs it, so CI runs these).
+// The WebGL2 viewer in headless Chromium (Debian's chromium, software WebGL2 through SwiftShader)
+// against the CPU renderer, the C++ reference decoders and the codec's own decoder, on a small
+// twill LPCA export, a pca-view export and a neural export of the same twill. Skips only when Chromium is absent (./run installs it, so CI runs these).
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -10,6 +10,8 @@
 
 #include "libbtf/compress/codec.h"
 #include "libbtf/compress/compress.h"
+#include "libbtf/export/neural.h"
+#include "libbtf/export/neural_reference_decoder.h"
 #include "libbtf/export/sattler.h"
 #include "libbtf/export/sattler_reference_decoder.h"
 #include "libbtf/export/schneider.h"
@@ -65,9 +67,30 @@ void TwillPcaViewExport(const std::filesystem::path& dir, const std::filesystem:
   if (!codec_file.empty()) WriteCodec(codec_file, codec);
 }
 
+// The same twill compressed with the neural codec: 8 latents (uint8 codes), decoder 14 -> 32 ->
+// 32 -> 3 (SiLU), 400 steps of 1024 samples (about 2 s); exported in the neural-mlp layout.
+const Codec& TwillNeuralCodec() {
+  static const Codec codec = [] {
+    CompressOptions co;
+    co.method = CodecMethod::kNeural;
+    co.seed = 7;
+    co.neural.samples = 1 << 16;
+    co.neural.batch = 1024;
+    co.neural.steps = 400;
+    return test::CompressDataset(Twill(), co);
+  }();
+  return codec;
+}
+void TwillNeuralExport(const std::filesystem::path& dir, const std::filesystem::path& codec_file = {}) {
+  ExportNeural(TwillNeuralCodec(), dir);
+  if (!codec_file.empty()) WriteCodec(codec_file, TwillNeuralCodec());
+}
+
 using Exporter = void (*)(const std::filesystem::path&, const std::filesystem::path&);
 void Lpca(const std::filesystem::path& dir, const std::filesystem::path& codec) { TwillExport(dir, codec); }
 void PcaView(const std::filesystem::path& dir, const std::filesystem::path& codec) { TwillPcaViewExport(dir, codec); }
+void Neural(const std::filesystem::path& dir, const std::filesystem::path& codec) { TwillNeuralExport(dir, codec); }
+const char* ExporterName(Exporter e) { return e == PcaView ? " pca-view" : e == Neural ? " neural" : " lpca"; }
 
 #define SKIP_WITHOUT_CHROMIUM()                                                                       \
   do {                                                                                                \
@@ -177,7 +200,7 @@ void ExpectSceneAgrees(const std::string& name, bool cpu_of_codec = false, doubl
   ASSERT_EQ(web.width, width);
   ASSERT_EQ(web.height, height);
   const Agreement a = Compare(scene, cpu, web, Twill().width(), Twill().height());
-  std::cout << name << (exporter == PcaView ? " pca-view" : " lpca") << (cpu_of_codec ? " (CPU: codec)" : " (CPU: export)") << ": level " << a.level << ", mean |diff| " << 100 * a.mean_abs / a.level << " %, max inside "
+  std::cout << name << ExporterName(exporter) << (cpu_of_codec ? " (CPU: codec)" : " (CPU: export)") << ": level " << a.level << ", mean |diff| " << 100 * a.mean_abs / a.level << " %, max inside "
             << 100 * a.max_abs_inside / a.level << " % over " << a.inside << " pixels (left out: " << a.silhouette
             << " silhouette, " << a.texel_edge << " texel-edge pixels; worst pixel " << a.worst_edge_distance
             << " texel from an edge), " << s.seconds << " s in the browser\n";
@@ -341,6 +364,89 @@ TEST(Browser, SattlerGlslMatchesTheReferenceDecoderWithHalfFloats) {
   o.atlas_side = 128;
   ExpectSattlerGlslMatchesTheReferenceDecoder(o);
 }
+
+// btf_neural.glsl in the browser (float32, SwiftShader) against NeuralReferenceDecoder (double)
+// and against the codec's own CPU decoder (Codec::Value with nearest texel, float32 Eigen), at
+// 1024 queries at sampled (view, light) pairs and 2048 random (uv, wi, wo) over the whole
+// hemispheres. Error measure: |got - want| / (|want| + epsilon), the size of the difference of
+// the decoder outputs y = log(value + epsilon) (value = exp(y) - epsilon, so dv = (v + eps) dy).
+// Both sides evaluate the same latents and weights; what differs is float32 against double (or
+// against Eigen's float32 summation order): dot products of up to 33 terms, the activations' exp,
+// the Fourier features (btf_sincos_pi's polynomials: SwiftShader's own sin and cos had moved y by
+// 4e-4), the final exp. Each contributes O(2^-24) relative to the terms' sizes (|y| and the
+// summed |w a| are O(10) here): measured at most 2.5e-6 (printed). Tolerance: 2e-5, 8x that,
+// far below what a wrong weight, a wrong encoding element or a swapped texel gives (O(0.1)).
+void ExpectNeuralGlslMatchesTheDecoders(const Codec& codec, const std::string& what) {
+  SKIP_WITHOUT_CHROMIUM();
+  const auto dir = test::TempDir() / "export";
+  ExportNeural(codec, dir);
+  const NeuralReferenceDecoder ref(dir);
+  const Dataset& d = Twill();
+  Queries qs;
+  const int W = ref.width(), H = ref.height();
+  std::mt19937 rng(23);
+  std::uniform_real_distribution<double> u01(0, 1);
+  for (int i = 0; i < 1024; ++i) {
+    const int x = int(u01(rng) * W) % W, y = int(u01(rng) * H) % H;
+    qs.Add(x, y, Vec2((x + 0.5) / W, 1 - (y + 0.5) / H), d.lights()[int(u01(rng) * d.num_lights()) % d.num_lights()],
+           d.views()[int(u01(rng) * d.num_views()) % d.num_views()]);
+  }
+  qs.AddRandom(W, H, 2048, rng);
+  std::string renderer;
+  const std::vector<float> got = EvaluateInBrowser(BrowserOptions{}, dir, qs.q, &renderer);
+  ASSERT_EQ(got.size(), qs.size() * 3);
+  const double eps = ref.log_epsilon();
+  double worst_ref = 0, worst_codec = 0, worst_cpu = 0, lo = 1e30, hi = -1e30;
+  for (std::size_t i = 0; i < qs.size(); ++i) {
+    float want[3], cpu[3];
+    ref.Value(qs.x[i], qs.y[i], qs.wi(i), qs.wo(i), want);
+    codec.Value(Vec2((qs.x[i] + 0.5) / W, 1 - (qs.y[i] + 0.5) / H), qs.wi(i), qs.wo(i), cpu, UvFilter::kNearest);
+    for (int c = 0; c < 3; ++c) {
+      const double g = got[i * 3 + c];
+      worst_ref = std::max(worst_ref, std::abs(g - want[c]) / (std::abs(want[c]) + eps));
+      worst_codec = std::max(worst_codec, std::abs(g - cpu[c]) / (std::abs(cpu[c]) + eps));
+      worst_cpu = std::max(worst_cpu, std::abs(double(want[c]) - cpu[c]) / (std::abs(cpu[c]) + eps));
+      lo = std::min(lo, std::log(cpu[c] + eps)), hi = std::max(hi, std::log(cpu[c] + eps));
+    }
+  }
+  std::cout << "neural GLSL (" << what << "; " << renderer << "): worst |diff| / (|value| + eps) against the reference "
+            << "decoder " << worst_ref << ", against Codec::Value " << worst_codec << " (reference vs Codec::Value "
+            << worst_cpu << "; log(value + eps) from " << lo << " to " << hi << ")\n";
+  EXPECT_GT(hi - lo, 0.5);  // the decoder's output varies over the queries
+  EXPECT_LE(worst_ref, 2e-5);
+  EXPECT_LE(worst_codec, 2e-5);
+}
+
+TEST(Browser, NeuralGlslMatchesTheReferenceDecoderAndTheCodec) {
+  ExpectNeuralGlslMatchesTheDecoders(TwillNeuralCodec(), "uint8 latents, SiLU");
+}
+
+// Half latents, 5 of them (a partly filled second layer), 2 Fourier octaves and softplus (the
+// decoder's parameters reused with that activation: btf-compress trains SiLU only).
+TEST(Browser, NeuralGlslMatchesWithHalfLatentsFourierFeaturesAndSoftplus) {
+  CompressOptions co;
+  co.method = CodecMethod::kNeural;
+  co.seed = 7;
+  co.neural.latent = 5;
+  co.neural.latent_storage = "half";
+  co.neural.fourier = 2;
+  co.neural.samples = 1 << 15;
+  co.neural.batch = 1024;
+  co.neural.steps = 100;
+  Codec codec = test::CompressDataset(Twill(), co);
+  NeuralCodecModel& m = CodecBuilder::neural(codec);
+  NeuralNetShape shape = m.net.shape();
+  shape.activation = Activation::kSoftplus;
+  NeuralNet net(shape, 0);
+  net.parameters() = m.net.parameters();
+  m.net = net;
+  ExpectNeuralGlslMatchesTheDecoders(codec, "half latents, 2 Fourier octaves, softplus");
+}
+
+// The neural export drawn by the viewer against the CPU render of the same export
+// (NeuralReferenceDecoder), under the tolerances of the first rows; the decoder runs per pixel
+// and light, so the patch under the point light only.
+TEST(Browser, NeuralPatchPointAgreesWithTheCpuRender) { ExpectSceneAgrees("patch-point", false, 0.01, 0.05, Neural); }
 
 }  // namespace
 }  // namespace btf

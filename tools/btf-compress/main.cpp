@@ -2,12 +2,13 @@
 // export (docs/btf-compress.md).
 //   btf-compress DATASET --method pca-view|lpca|lpca-tensor|fmf|dfmf|neural [...] -o codec.h5
 //   btf-compress decode CODEC -o dataset.h5
-//   btf-compress export CODEC [--format schneider|sattler] -o DIR
+//   btf-compress export CODEC [--format schneider|sattler|neural] -o DIR
 #include <optional>
 
 #include "libbtf/compress/codec.h"
 #include "libbtf/compress/codec_source.h"
 #include "libbtf/compress/compress.h"
+#include "libbtf/export/neural.h"
 #include "libbtf/export/sattler.h"
 #include "libbtf/export/schneider.h"
 #include "libbtf/io/bonn.h"
@@ -26,10 +27,18 @@ struct DecodeFlags {
 };
 
 struct ExportFlags {
-  std::string codec, output, format;  // schneider or sattler (CLI-checked); empty: by the codec's method
+  std::string codec, output, format;  // schneider, sattler or neural (CLI-checked); empty: by the codec's method
   btf::SchneiderExportOptions options;
   bool grids_given = false;  // --view-grid / --light-grid (schneider only)
+  bool storage_given = false;  // --components / --storage / --atlas-side (not for neural)
 };
+
+// The export format of a codec when --format is not given: by its method.
+std::string DefaultExportFormat(btf::CodecMethod method) {
+  if (method == btf::CodecMethod::kPcaView) return "sattler";
+  if (method == btf::CodecMethod::kNeural) return "neural";
+  return "schneider";
+}
 
 int RunCompress(const CLI::App& app, const btf::cli::CommonFlags& common, CompressFlags& f) {
   if (f.dataset.empty()) btf::ThrowUsage("give a DATASET to compress, or a subcommand (decode, export); see --help");
@@ -66,8 +75,15 @@ int RunExport(const CLI::App& app, const btf::cli::CommonFlags& common, const Ex
   btf::cli::RequireSingleRank("btf-compress export");
   btf::CheckOutput(f.output, {f.codec}, btf::OutputKind::kFolder);
   const btf::Codec codec = btf::ReadCodec(f.codec);
-  const std::string format =
-      !f.format.empty() ? f.format : codec.method() == btf::CodecMethod::kPcaView ? "sattler" : "schneider";
+  const std::string format = !f.format.empty() ? f.format : DefaultExportFormat(codec.method());
+  if (format == "neural") {
+    if (f.grids_given || f.storage_given)
+      btf::ThrowUsage("--view-grid, --light-grid, --components, --storage and --atlas-side belong to --format schneider "
+                      "and sattler (a neural export keeps the codec's latents and decoder as stored)");
+    const btf::NeuralExportSummary s = btf::ExportNeural(codec, f.output, btf::cli::MakeReporter(common));
+    btf::cli::PrintSummary(app, common, s, {{"codec", f.codec}});
+    return 0;
+  }
   if (format == "schneider") {
     const btf::SchneiderExportSummary s =
         btf::ExportSchneider(f.options, codec, f.output, btf::cli::MakeReporter(common));
@@ -88,7 +104,7 @@ int RunExport(const CLI::App& app, const btf::cli::CommonFlags& common, const Ex
 
 int main(int argc, char** argv) {
   CLI::App app{"Compress a BTF dataset with per-view PCA (Sattler 2003) or local PCA (Mueller 2003); decode codecs; "
-               "export LPCA (Schneider 2004) and pca-view (Sattler 2003) codecs for real-time rendering.",
+               "export LPCA (Schneider 2004), pca-view (Sattler 2003) and neural codecs for real-time rendering.",
                "btf-compress"};
   btf::cli::Configure(app);
   app.require_subcommand(0, 1);
@@ -148,17 +164,18 @@ int main(int argc, char** argv) {
   cd->add_option("-o,--output", df.output, "Output dataset (.h5)")->required();
 
   ExportFlags ef;
-  auto* ce = app.add_subcommand("export", "Export an LPCA or pca-view codec for a renderer");
-  ce->add_option("CODEC", ef.codec, "Codec file (lpca or pca-view)")->required();
-  ce->add_option("--format", ef.format, "Export format: schneider (lpca) or sattler (pca-view); default: by the codec's method")
-      ->check(CLI::IsMember({"schneider", "sattler"}));
+  auto* ce = app.add_subcommand("export", "Export an LPCA, pca-view or neural codec for a renderer");
+  ce->add_option("CODEC", ef.codec, "Codec file (lpca, pca-view or neural)")->required();
+  ce->add_option("--format", ef.format,
+                 "Export format: schneider (lpca), sattler (pca-view) or neural (neural); default: by the codec's method")
+      ->check(CLI::IsMember({"schneider", "sattler", "neural"}));
   auto* vg = ce->add_option("--view-grid", ef.options.view_grid, "schneider: samples per side of the (s_v, t_v) square");
   auto* lg = ce->add_option("--light-grid", ef.options.light_grid, "schneider: samples per side of the (s_l, t_l) square");
-  ce->add_option("--components", ef.options.components,
+  auto* ec = ce->add_option("--components", ef.options.components,
                  "Eigen-ABRDFs per cluster (schneider) or eigen-textures per view (sattler) to export (-1 = all)");
-  ce->add_option("--storage", ef.options.storage, "Atlas values: u8 (8-bit unsigned normalised) or f16 (half floats)")
+  auto* es = ce->add_option("--storage", ef.options.storage, "Atlas values: u8 (8-bit unsigned normalised) or f16 (half floats)")
       ->check(CLI::IsMember({"u8", "f16"}));
-  ce->add_option("--atlas-side", ef.options.atlas_side,
+  auto* ea = ce->add_option("--atlas-side", ef.options.atlas_side,
                  "Largest atlas side in texels (schneider: 3D texture width, height and depth, WebGL2 guarantees 256; "
                  "sattler: texture-array layer width and height, WebGL2 guarantees 2048)");
   ce->add_option("-o,--output", ef.output, "Output folder")->required();
@@ -168,6 +185,7 @@ int main(int argc, char** argv) {
     if (cd->parsed()) return RunDecode(app, common, df);
     if (ce->parsed()) {
       ef.grids_given = vg->count() + lg->count() > 0;
+      ef.storage_given = ec->count() + es->count() + ea->count() > 0;
       return RunExport(app, common, ef);
     }
     return RunCompress(app, common, cf);
