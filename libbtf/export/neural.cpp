@@ -135,7 +135,7 @@ nlohmann::json NeuralManifest(const Codec& codec, const std::string& latents_fil
   const int E = m.encoding.Width();
   nlohmann::json j;
   j["format"] = kSchneiderExportFormat;
-  j["format_version"] = kNeuralExportVersion;
+  j["format_version"] = kSchneiderExportVersion;
   j["layout"] = kNeuralLayout;
   j["source"] = {{"codec_method", "neural"}, {"view_sampling", codec.views().name()},
                  {"light_sampling", codec.lights().name()}, {"compression", codec.provenance().value("options", nlohmann::json())}};

@@ -27,10 +27,8 @@
 
 namespace btf {
 
-// The layout of libbtf/export/neural.h (format 2.2.0, the first with it and with checksums; the
-// version every layout writes).
+// The layout of libbtf/export/neural.h (from format 2.2.0, kSchneiderExportVersion).
 inline constexpr const char* kNeuralLayout = "neural-mlp";
-inline constexpr const char* kNeuralExportVersion = "2.2.0";
 
 // Limits of the GLSL function: a layer's activations are held in registers (at most
 // kNeuralExportMaxWidth values), and every neuron is a row of the decoder texture (at most
