@@ -106,7 +106,9 @@ std::string_view ActivationName(Activation a) {
   return "?";
 }
 
-void DirectionEncoding::Check() const { BTF_CHECK_OPTION(fourier >= 0 && fourier <= 8, "fourier", fourier); }
+void DirectionEncoding::Check() const {
+  BTF_CHECK_OPTION(fourier >= 0 && fourier <= 8, "fourier", fmt::format("must be 0..8 (given {})", fourier));
+}
 
 void EncodeDirections(const DirectionEncoding& e, const float* wi, const float* wo, float* out) {
   out[0] = wi[0];
@@ -130,10 +132,11 @@ void EncodeDirections(const DirectionEncoding& e, const float* wi, const float* 
 }
 
 void NeuralNetShape::Check() const {
-  BTF_CHECK_OPTION(inputs >= 1 && inputs <= 4096, "inputs", inputs);
-  BTF_CHECK_OPTION(outputs >= 1 && outputs <= 4096, "outputs", outputs);
+  BTF_CHECK_OPTION(inputs >= 1 && inputs <= 4096, "inputs", fmt::format("must be 1..4096 (given {})", inputs));
+  BTF_CHECK_OPTION(outputs >= 1 && outputs <= 4096, "outputs", fmt::format("must be 1..4096 (given {})", outputs));
   BTF_CHECK_OPTION(hidden.size() <= 16, "hidden", "at most 16 layers");
-  for (const int h : hidden) BTF_CHECK_OPTION(h >= 1 && h <= 4096, "hidden", h);
+  for (const int h : hidden)
+    BTF_CHECK_OPTION(h >= 1 && h <= 4096, "hidden", fmt::format("each width must be 1..4096 (given {})", h));
 }
 
 template <typename Scalar>
@@ -232,9 +235,9 @@ template class BasicNeuralNet<float>;
 template class BasicNeuralNet<double>;
 
 void AdamOptions::Check() const {
-  BTF_CHECK_OPTION(beta1 >= 0 && beta1 < 1, "beta1", beta1);
-  BTF_CHECK_OPTION(beta2 >= 0 && beta2 < 1, "beta2", beta2);
-  BTF_CHECK_OPTION(epsilon > 0 && std::isfinite(epsilon), "epsilon", epsilon);
+  BTF_CHECK_OPTION(beta1 >= 0 && beta1 < 1, "beta1", fmt::format("must be in [0, 1) (given {})", beta1));
+  BTF_CHECK_OPTION(beta2 >= 0 && beta2 < 1, "beta2", fmt::format("must be in [0, 1) (given {})", beta2));
+  BTF_CHECK_OPTION(epsilon > 0 && std::isfinite(epsilon), "epsilon", fmt::format("must be > 0 (given {})", epsilon));
 }
 
 namespace {
@@ -325,18 +328,23 @@ void NeuralModel::Evaluate(const std::int32_t* texel, const float* wi, const flo
 }
 
 void NeuralTrainOptions::Check() const {
-  BTF_CHECK_OPTION(latent >= 0 && latent <= 256, "latent", latent);
+  BTF_CHECK_OPTION(latent >= 0 && latent <= 256, "latent", fmt::format("must be 0..256 (given {})", latent));
   encoding.Check();  // before its Width() is used
   NeuralNetShape{latent + encoding.Width(), hidden, 1, activation}.Check();
   adam.Check();
-  BTF_CHECK_OPTION(batch >= 1 && batch <= (1 << 24), "batch", batch);
-  BTF_CHECK_OPTION(block >= 1 && block <= batch, "block", block);
-  BTF_CHECK_OPTION(steps >= 0, "steps", steps);
-  BTF_CHECK_OPTION(steps > 0 || (epochs > 0 && epochs <= 1e6), "epochs", epochs);
-  BTF_CHECK_OPTION(learning_rate > 0 && learning_rate < 1e3, "learning_rate", learning_rate);
-  BTF_CHECK_OPTION(latent_learning_rate >= 0 && latent_learning_rate < 1e3, "latent_learning_rate", latent_learning_rate);
-  BTF_CHECK_OPTION(final_learning_rate > 0 && final_learning_rate <= 1, "final_learning_rate", final_learning_rate);
-  BTF_CHECK_OPTION(latent_init >= 0 && latent_init <= 10, "latent_init", latent_init);
+  BTF_CHECK_OPTION(batch >= 1 && batch <= (1 << 24), "batch", fmt::format("must be 1..16777216 (given {})", batch));
+  BTF_CHECK_OPTION(block >= 1 && block <= batch, "block", fmt::format("must be 1..batch (given {})", block));
+  BTF_CHECK_OPTION(steps >= 0, "steps", fmt::format("must be >= 0 (given {})", steps));
+  BTF_CHECK_OPTION(steps > 0 || (epochs > 0 && epochs <= 1e6), "epochs",
+                   fmt::format("must be in (0, 1e6] when steps is 0 (given {})", epochs));
+  BTF_CHECK_OPTION(learning_rate > 0 && learning_rate < 1e3, "learning_rate",
+                   fmt::format("must be in (0, 1000) (given {})", learning_rate));
+  BTF_CHECK_OPTION(latent_learning_rate >= 0 && latent_learning_rate < 1e3, "latent_learning_rate",
+                   fmt::format("must be in [0, 1000) (given {})", latent_learning_rate));
+  BTF_CHECK_OPTION(final_learning_rate > 0 && final_learning_rate <= 1, "final_learning_rate",
+                   fmt::format("must be in (0, 1] (given {})", final_learning_rate));
+  BTF_CHECK_OPTION(latent_init >= 0 && latent_init <= 10, "latent_init",
+                   fmt::format("must be in [0, 10] (given {})", latent_init));
 }
 
 void BlockGradient::Clear() {
