@@ -11,6 +11,7 @@
 #include "libbtf/core/timer.h"
 #include "libbtf/io/bonn.h"
 #include "libbtf/io/dataset_io.h"
+#include "libbtf/io/image_io.h"
 #include "libbtf/io/slot_source.h"
 
 namespace btf {
@@ -34,6 +35,8 @@ struct ConvertOptions {
   std::string pattern;
   // Missing (view, light) images are written as 0 instead of refusing the set.
   bool allow_missing = false;
+  // Image-set input: the largest image read (ImageReadOptions::max_pixels; 0 = no limit).
+  std::uint64_t max_pixels = kDefaultMaxImagePixels;
   void Check() const;
   nlohmann::json ToJson() const;
 };

@@ -85,6 +85,9 @@ int main(int argc, char** argv) {
                  "--layout pattern: image path relative to the folder (or zip) with fields {tv} {pv} {tl} {pl} (degrees), e.g. "
                  "'tv{tv}_pv{pv}/tl{tl}_pl{pl}.exr'");
   app.add_flag("--allow-missing", o.allow_missing, "Image sets: write missing (view, light) images as 0 instead of failing");
+  app.add_option("--max-pixels", o.max_pixels,
+                 "Image sets: refuse an image whose header claims more pixels (width x height), before reading it (0 = "
+                 "no limit)");
   app.add_option("--components,-c", f.fmf.components,
                  "FMF/DFMF output: components of the truncated SVD (per YUV channel for DFMF); clamped to the rank");
   app.add_option("--power-iterations", f.fmf.power_iterations, "FMF/DFMF output: power iterations of the randomised SVD");
