@@ -1,6 +1,7 @@
 #include "libbtf/io/rig.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -295,46 +296,57 @@ std::vector<std::uint8_t> ArucoMarkerModules(const std::string& dictionary, int 
 
 namespace {
 
-// OpenCV 4.6's YAML parser recurses once per nesting level without a bound (a file nested 40,000
-// levels deep overflows the stack). A Kalibr target is one flat mapping of scalars, so nesting is
-// bounded before parsing, by an upper bound of the parser's depth: on each line, its indentation
-// (a nested block is indented further), each leading "- " or "? " (a block entry nested on the same
-// line) and every flow bracket ([ or {) still open, outside quoted scalars. Where the scan cannot
-// tell (a quote inside a plain scalar, a comment) it counts, so it never counts less.
-void CheckYamlNesting(const std::string& text, const std::filesystem::path& path) {
-  int flow = 0, line = 1, depth = 0;
-  bool start = true;  // before the first non-blank character of the line
-  char quote = 0, last = 0;  // the open quote; the last non-blank character outside quotes
-  for (std::size_t i = 0; i < text.size(); ++i) {
-    const char ch = text[i];
-    if (ch == '\n') {
-      ++line, depth = 0, start = true, quote = 0, last = 0;
+// OpenCV 4.6's YAML parser is not safe on arbitrary text: it recurses once per nesting level
+// without a bound (a file nested 40,000 levels deep overflowed the stack) and loops forever on
+// some short inputs with tags (found by fuzz_rig). A Kalibr target is one flat mapping of scalars,
+// so only that reaches the parser: every line is blank, a comment, "---", or `key: value` at
+// column 0 with a key of letters, digits and '_' and a value that is empty, quoted on the line, or
+// plain without brackets, braces, commas or a leading tag, anchor, alias or block indicator;
+// printable ASCII only. Nothing nests, so the parser's depth is 1.
+void CheckFlatYaml(const std::string& text, const std::filesystem::path& path) {
+  std::size_t line_start = 0;
+  for (int line = 1; line_start < text.size(); ++line) {
+    std::size_t end = text.find('\n', line_start);
+    if (end == std::string::npos) end = text.size();
+    std::string l = text.substr(line_start, end - line_start);
+    line_start = end + 1;
+    if (!l.empty() && l.back() == '\r') l.pop_back();
+    const auto fail = [&](const std::string& what) {
+      ThrowBadInput("'{}': line {} {}: a Kalibr target is one flat mapping of 'key: value' lines (no nesting, lists, "
+                    "tags or anchors)",
+                    path.string(), line, what);
+    };
+    for (const char ch : l)
+      if (!(ch == '\t' || (ch >= 0x20 && ch < 0x7f))) fail("holds a byte that is not printable ASCII");
+    const std::size_t first = l.find_first_not_of(" \t");
+    if (first == std::string::npos || l[first] == '#' || l == "---") continue;
+    if (first > 0) fail("is indented (a nested block)");
+    std::size_t i = 0;
+    while (i < l.size() && (std::isalnum(static_cast<unsigned char>(l[i])) || l[i] == '_')) ++i;
+    if (i == 0 || i >= l.size() || l[i] != ':' || (i + 1 < l.size() && l[i + 1] != ' ' && l[i + 1] != '\t'))
+      fail("is not 'key: value'");
+    i = l.find_first_not_of(" \t", i + 1);
+    if (i == std::string::npos || l[i] == '#') continue;  // an empty value
+    if (l[i] == '\'' || l[i] == '"') {
+      const char q = l[i];
+      for (++i; i < l.size() && l[i] != q; ++i)
+        if (q == '"' && l[i] == '\\') ++i;
+      if (i >= l.size()) fail("has a quoted value that does not end on the line");
+      i = l.find_first_not_of(" \t", i + 1);
+      if (i != std::string::npos && l[i] != '#') fail("has text after its quoted value");
       continue;
     }
-    if (quote) {
-      if (ch == '\\' && quote == '"') ++i;  // an escaped character
-      else if (ch == quote) quote = 0, last = ch;
-      continue;
-    }
-    if (ch == ' ' || ch == '\t') {
-      depth += start;
-      continue;
-    }
-    if (start && (ch == '-' || ch == '?') && i + 1 < text.size() && (text[i + 1] == ' ' || text[i + 1] == '\t')) {
-      ++depth, ++i;
-      continue;
-    }
-    start = false;
-    if ((ch == '\'' || ch == '"') && (last == 0 || std::strchr(":,[{-?", last))) quote = ch;
-    if (ch == '[' || ch == '{') ++flow;
-    if ((ch == ']' || ch == '}') && flow > 0) --flow;
-    last = ch;
-    if (depth + flow > kMaxBoardYamlDepth)
-      ThrowBadInput("'{}': line {} nests more than {} levels deep (indentation, '- ' entries and open brackets): a "
-                    "Kalibr target is one flat mapping of scalars",
-                    path.string(), line, kMaxBoardYamlDepth);
+    if (std::strchr("!&*|>%@`?-", l[i]) && !(l[i] == '-' && i + 1 < l.size() && l[i + 1] != ' ' && l[i + 1] != '\t'))
+      fail(fmt::format("has a value starting with '{}' (a tag, anchor, alias, block or list)", l[i]));
+    std::size_t comment = l.find(" #", i);
+    comment = std::min(comment, l.find("\t#", i));
+    if (l.substr(i, comment == std::string::npos ? std::string::npos : comment - i).find_first_of("[]{},") !=
+        std::string::npos)
+      fail("has a flow collection ([ ] { } ,) in its value");
   }
 }
+
+Board KalibrTargetFromYaml(const cv::FileStorage& fs, const std::filesystem::path& path);
 
 // Kalibr's target YAML through OpenCV's FileStorage (which wants a %YAML:1.0 directive first).
 Board ReadKalibrTarget(const std::filesystem::path& path) {
@@ -347,7 +359,7 @@ Board ReadKalibrTarget(const std::filesystem::path& path) {
   if (!in) ThrowIo("cannot open '{}': check that the file exists and is readable", path.string());
   std::stringstream text;
   text << in.rdbuf();
-  CheckYamlNesting(text.str(), path);
+  CheckFlatYaml(text.str(), path);
   cv::FileStorage fs;
   try {
     fs.open("%YAML:1.0\n" + text.str(), cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
@@ -355,6 +367,20 @@ Board ReadKalibrTarget(const std::filesystem::path& path) {
     ThrowBadInput("'{}': not valid YAML ({}; line numbers count one extra line)", path.string(), e.err);
   }
   if (!fs.isOpened()) ThrowBadInput("'{}': not valid YAML", path.string());
+  // OpenCV asserts (cv::Exception) where a top level is not a mapping (found by fuzz_rig).
+  try {
+    if (!fs.root().isMap())
+      ThrowBadInput("'{}': not a Kalibr target: the top level must be a mapping of fields (target_type: ...)",
+                    path.string());
+    return KalibrTargetFromYaml(fs, path);
+  } catch (const cv::Exception& e) {
+    ThrowBadInput("'{}': not a Kalibr target: every YAML document must be a mapping of fields ({})", path.string(),
+                  e.err);
+  }
+}
+
+// The fields of a parsed Kalibr target (ReadKalibrTarget).
+Board KalibrTargetFromYaml(const cv::FileStorage& fs, const std::filesystem::path& path) {
   const auto field = [&](const char* key) {
     const cv::FileNode n = fs[key];
     if (n.empty()) ThrowBadInput("'{}': missing required field '{}'", path.string(), key);
