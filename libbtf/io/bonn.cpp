@@ -14,7 +14,6 @@
 
 #include "libbtf/core/atomic_file.h"
 #include "libbtf/core/error.h"
-#include "libbtf/io/dataset_stats.h"
 #include "libbtf/io/half.h"
 
 namespace btf {
@@ -210,29 +209,10 @@ struct PvfView {
   MatrixRef components, weights;
 };
 
-// "bdi", "dfmf", "fmf", "pvf".
-const char* BonnFormatName(BonnFormat format) {
-  switch (format) {
-    case BonnFormat::kBdi: return "bdi";
-    case BonnFormat::kDfmf: return "dfmf";
-    case BonnFormat::kFmf: return "fmf";
-    case BonnFormat::kPvf: return "pvf";
-  }
-  return "?";
-}
-
 // DFMF colour models (decorrelations) this reader undoes; others are refused (bad input).
 // 0 RGB, 1 YUV, 3 PCA, 4 YCoCg, 9 Ylog_UV, 10 Ylog_Ulog_Vlog, 11 Ylog_UdivY_VdivY, 12 log RGB.
 bool BonnColorModelSupported(int m) { return m == 0 || m == 1 || m == 3 || m == 4 || (m >= 9 && m <= 12); }
 
-// "rgb", "yuv", "lab", "pca", "ycocg", "spectral", "spectral_linear", "ylog_uv", "ylog_ulog_vlog",
-// "ylog_udivy_vdivy", "log_rgb", or "unknown".
-std::string BonnColorModelName(int m) {
-  static const char* const kNames[] = {"rgb",     "yuv",     "lab",           "pca",           "ycocg",
-                                       "spectral", "spectral_linear", "unknown", "unknown", "ylog_uv",
-                                       "ylog_ulog_vlog", "ylog_udivy_vdivy", "log_rgb"};
-  return m >= 0 && m <= 12 ? kNames[m] : "unknown";
-}
 
 // Undoes colour model `model` on `n` pixels of 3 (or, for models 0 and 12, `channels`) values in
 // place. `mean` and `transform` (row-major) are used by model 3 only.
@@ -278,6 +258,23 @@ void BonnUndecorrelate(int model, const std::array<float, 3>& mean, const std::a
 }
 
 }  // namespace
+
+const char* BonnFormatName(BonnFormat format) {
+  switch (format) {
+    case BonnFormat::kBdi: return "bdi";
+    case BonnFormat::kDfmf: return "dfmf";
+    case BonnFormat::kFmf: return "fmf";
+    case BonnFormat::kPvf: return "pvf";
+  }
+  return "?";
+}
+
+std::string BonnColorModelName(int m) {
+  static const char* const kNames[] = {"rgb",     "yuv",     "lab",           "pca",           "ycocg",
+                                       "spectral", "spectral_linear", "unknown", "unknown", "ylog_uv",
+                                       "ylog_ulog_vlog", "ylog_udivy_vdivy", "log_rgb"};
+  return m >= 0 && m <= 12 ? kNames[m] : "unknown";
+}
 
 std::string BonnSignatureOf(const std::filesystem::path& path) {
   const BinFile f(path);
@@ -594,6 +591,7 @@ void BonnReader::Impl::ReadPvf(Cursor& c) {
 }
 
 void BonnReader::Impl::ReadBdi(Cursor& c) {
+  const std::uint64_t size_at = c.pos();
   h.width = int(c.Count("width", 1, 1u << 20));
   h.height = int(c.Count("height", 1, 1u << 20));
   CheckAllocation(4.0 * h.lights.size() * h.width * h.height * h.channels(),
@@ -605,27 +603,41 @@ void BonnReader::Impl::ReadBdi(Cursor& c) {
   if (h.compression != 0 && h.compression != 2)
     c.Fail(comp_at, "compression", fmt::format("is {}; expected 0 (full) or 2 (sparse)", h.compression));
   const std::uint64_t texels = std::uint64_t(h.width) * h.height;
-  std::vector<std::uint8_t> mask(texels);
+  // Every claimed size is checked against the file before anything of that size is allocated.
   const std::uint64_t mask_at = c.pos();
+  c.file().Need(mask_at, double(texels),
+                fmt::format("mask of {} x {} texels (width and height at byte {})", h.width, h.height, size_at));
+  std::vector<std::uint8_t> mask(texels);
   c.file().ReadAt(mask_at, mask.data(), mask.size(), "mask");
   c.Skip(double(texels), "mask");
-  storage_index.assign(texels, -1);
-  std::int64_t stored = 0;
-  for (std::uint64_t t = 0; t < texels; ++t)
-    if (h.compression == 0 || mask[t] != 0) storage_index[t] = stored++;
-  h.stored_texels = std::uint64_t(stored);
+  for (std::uint64_t t = 0; t < texels; ++t) h.stored_texels += h.compression == 0 || mask[t] != 0;
   ReadRotations(c);
   const std::uint64_t abrdf_bytes = 2ull * h.views.size() * h.lights.size() * std::uint64_t(h.channels());
   const std::uint64_t per_chunk = std::uint64_t(h.width) * h.scan_lines_per_chunk;
   const std::uint64_t chunks = (h.stored_texels + per_chunk - 1) / per_chunk;
+  c.file().Need(c.pos(), double(h.stored_texels) * double(abrdf_bytes) + 4.0 * double(chunks),
+                fmt::format("{} chunks of {} stored ABRDFs x {} bytes", chunks, h.stored_texels, abrdf_bytes));
+  storage_index.assign(texels, -1);
+  std::int64_t stored = 0;
+  for (std::uint64_t t = 0; t < texels; ++t)
+    if (h.compression == 0 || mask[t] != 0) storage_index[t] = stored++;
   for (std::uint64_t i = 0; i < chunks; ++i) {
     const std::uint64_t at = c.pos();
-    const std::uint32_t bytes = c.U32(fmt::format("chunk {} byte_size", i));
+    const std::string field = fmt::format("chunk {} byte_size", i);
+    const std::uint32_t bytes = c.U32(field);
     const std::uint64_t n = std::min(per_chunk, h.stored_texels - i * per_chunk);
-    if (double(bytes) != double(n) * double(abrdf_bytes))
-      c.Fail(at, fmt::format("chunk {} byte_size", i),
-             fmt::format("is {}; expected {} ABRDFs x {} bytes = {:.0f}", bytes, n, abrdf_bytes,
-                         double(n) * double(abrdf_bytes)));
+    // btflib writes the last chunk padded to full scan lines (W x scan_lines_per_chunk ABRDFs).
+    const bool short_last = i + 1 == chunks && n < per_chunk;
+    const bool padded = short_last && double(bytes) == double(per_chunk) * double(abrdf_bytes);
+    if (double(bytes) != double(n) * double(abrdf_bytes) && !padded)
+      c.Fail(at, field,
+             fmt::format("is {}; expected {} ABRDFs x {} bytes = {:.0f}{}", bytes, n, abrdf_bytes,
+                         double(n) * double(abrdf_bytes),
+                         short_last ? fmt::format(" (or, padded to full scan lines as btflib writes it, {} x {} ABRDFs = "
+                                                  "{:.0f})",
+                                                  h.scan_lines_per_chunk, h.width, double(per_chunk) * double(abrdf_bytes))
+                                    : std::string()));
+    if (padded) h.padding_abrdfs = per_chunk - n;
     chunk_offsets.push_back(c.pos());
     c.Skip(double(bytes), fmt::format("chunk {} data", i));
   }
@@ -814,69 +826,6 @@ class BonnSlotSource final : public SlotSource {
 
 std::unique_ptr<SlotSource> OpenBonnSource(const std::filesystem::path& path) {
   return std::make_unique<BonnSlotSource>(path);
-}
-
-nlohmann::json DescribeBonnFile(const std::filesystem::path& path, bool with_stats, const Reporter& reporter) {
-  nlohmann::json j;
-  {
-    const BonnReader r(path, /*header_only=*/true);
-    const BonnHeader& h = r.header();
-    j["path"] = path.string();
-    j["format"] = std::string("bonn-") + BonnFormatName(h.format);
-    j["signature"] = h.signature;
-    j["shape"] = {{"views", h.views.size()},
-                  {"lights", h.lights.size()},
-                  {"height", h.height},
-                  {"width", h.width},
-                  {"channels", h.channels()}};
-    j["view_sampling"] = DescribeSampling(h.views);
-    j["light_sampling"] = DescribeSampling(h.lights);
-    j["channel_names"] = h.channel_names;
-    j["components"] = h.components;
-    j["scalar_sizes"] = h.scalar_sizes;
-    if (h.format == BonnFormat::kDfmf) {
-      j["color_model"] = {{"id", h.color_model}, {"name", BonnColorModelName(h.color_model)}};
-      j["header_components"] = h.header_components;
-    }
-    if (h.format == BonnFormat::kDfmf || h.format == BonnFormat::kFmf)
-      j["layout"] = h.transposed ? "transposed (U over texels, SxV over directions)" : "U over directions, SxV over texels";
-    if (h.format == BonnFormat::kFmf) {
-      j["fmf_header_version"] = h.fmf_header_version;
-      j["dynamic_range_reduction"] = h.dynamic_range_reduction == 0 ? "none" : "log";
-      j["height_map"] = {h.height_map_width, h.height_map_height};
-    }
-    if (h.format == BonnFormat::kPvf) {
-      j["pvf_header"] = h.pvf_legacy ? "legacy (301074)" : "current";
-      j["pvf_layout"] = h.pvf_images ? "stacked images" : "light fields";
-    }
-    if (h.format == BonnFormat::kBdi) {
-      j["compression"] = h.compression == 0 ? "full" : "sparse";
-      j["scan_lines_per_chunk"] = h.scan_lines_per_chunk;
-      j["stored_texels"] = h.stored_texels;
-    }
-    j["rotations"] = h.rotations.size();
-    j["cos_theta_i_included"] = h.cosine_flag;
-    j["stored_conventions"] = {
-        {"cosine_flag", h.cosine_flag},
-        {"values", h.cosine_flag ? "BRDF x cos(theta_i) as stored (not divided out)" : "as stored"},
-        {"texture_rows", "file row y = dataset row y (y = 0 first, not flipped)"},
-        {"epsilon", kBonnEpsilon},
-        {"clamping", "none"},
-        {"units", "relative (rgb_scale_factor and ppmm not applied)"}};
-    if (h.has_meta)
-      j["meta"] = {{"version", h.meta_version},
-                   {"measurement_setup", h.measurement_setup},
-                   {"image_sensor", h.image_sensor},
-                   {"light_source", h.light_source},
-                   {"ppmm", h.ppmm},
-                   {"rgb_scale_factor", h.rgb_scale_factor},
-                   {"xml_bytes", h.xml.size()}};
-    j["color_space"] = h.Info().color_space;
-    j["units"] = "relative";
-    j["file_bytes"] = h.file_bytes;
-  }
-  if (with_stats) j["values"] = ComputeValueStats(*OpenBonnSource(path), reporter).ToJson();
-  return j;
 }
 
 }  // namespace btf

@@ -70,6 +70,9 @@ struct BonnHeader {
   std::uint32_t scan_lines_per_chunk = 0;
   std::uint8_t compression = 0;  // 0 full, 2 sparse (1 bzip2 is refused)
   std::uint64_t stored_texels = 0;
+  // ABRDFs of padding after the last stored one: btflib writes its last chunk padded to full scan
+  // lines (W x scan_lines_per_chunk ABRDFs); the padding is never read.
+  std::uint64_t padding_abrdfs = 0;
 
   int channels() const { return int(channel_names.size()); }
   // Conventions as libbtf applies them (units "relative", cos flag carried, not divided out).
@@ -92,6 +95,12 @@ class BonnReader {
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
+
+// "bdi", "dfmf", "fmf", "pvf".
+const char* BonnFormatName(BonnFormat format);
+// The name of DFMF colour model `id`: "rgb", "yuv", "lab", "pca", "ycocg", "spectral",
+// "spectral_linear", "ylog_uv", "ylog_ulog_vlog", "ylog_udivy_vdivy", "log_rgb", or "unknown".
+std::string BonnColorModelName(int id);
 
 // A Bonn file as a view-slot source (kind "bonn-bdi", "bonn-dfmf", "bonn-fmf", "bonn-pvf").
 std::unique_ptr<SlotSource> OpenBonnSource(const std::filesystem::path& path);

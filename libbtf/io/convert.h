@@ -11,6 +11,7 @@
 #include "libbtf/core/timer.h"
 #include "libbtf/io/bonn.h"
 #include "libbtf/io/dataset_io.h"
+#include "libbtf/io/image_io.h"
 #include "libbtf/io/slot_source.h"
 
 namespace btf {
@@ -43,6 +44,8 @@ struct ConvertOptions {
   // input's samplings.
   int view = 0, light = 0;
   double exposure = 1;
+  // Image-set input: the largest image read (ImageReadOptions::max_pixels; 0 = no limit).
+  std::uint64_t max_pixels = kDefaultMaxImagePixels;
   void Check() const;
   nlohmann::json ToJson() const;
 };

@@ -324,6 +324,7 @@ ConvertSummary ImportImageSet(const ConvertOptions& options, const std::filesyst
                   missing.size() > shown ? ", ..." : "");
   }
   ImageReadOptions read;
+  read.max_pixels = options.max_pixels;
   if (options.layout == "ubo2003") read.colorspace = "srgb";  // 8-bit sRGB by definition, tagged or not
   const Found* first = nullptr;
   for (const Found* f : grid) first = first ? first : f;

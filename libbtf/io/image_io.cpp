@@ -118,6 +118,15 @@ Image Decode(const std::string& name, const std::string& bytes, const ImageReadO
   const OIIO::ImageSpec& spec = in->spec();
   if (spec.width < 1 || spec.height < 1 || spec.nchannels < 1)
     ThrowBadInput("image '{}' has an invalid size {}x{}x{}", name, spec.width, spec.height, spec.nchannels);
+  if (spec.depth > 1)
+    ThrowBadInput("image '{}' is a volume of {} slices: only 2-D images are read", name, spec.depth);
+  const std::uint64_t pixels = std::uint64_t(spec.width) * std::uint64_t(spec.height);
+  if (options.max_pixels > 0 && pixels > options.max_pixels)
+    ThrowBadInput("image '{}' claims {} x {} = {} pixels, over the limit of {} (--max-pixels); if the image is real "
+                  "and the machine has the memory ({:.3g} GiB for its {} channel(s) as float), pass --max-pixels {} "
+                  "or more",
+                  name, spec.width, spec.height, pixels, options.max_pixels,
+                  4.0 * double(pixels) * spec.nchannels / double(1ull << 30), spec.nchannels, pixels);
   CheckAllocation(4.0 * spec.width * spec.height * spec.nchannels, "image '" + name + "'");
   Image img(spec.width, spec.height, spec.nchannels);
   if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, img.pixels.data()))

@@ -1,6 +1,7 @@
 #pragma once
 // Image files through OpenImageIO. Pixels in memory are always linear float32, row-major,
 // channel fastest, y down (row 0 = top of the picture).
+#include <cstdint>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -27,12 +28,20 @@ struct ImageWriteOptions {
   int jpeg_quality = 0;  // JPEG quality 1..100; 0 = OpenImageIO's default (95)
 };
 
-// How integer pixel values are decoded to linear (float files are always read as stored).
+// The default ImageReadOptions::max_pixels: 2^27 (134217728) pixels, a 100-megapixel camera's
+// photo with room to spare; 4 channels of float32 take 2 GiB.
+inline constexpr std::uint64_t kDefaultMaxImagePixels = std::uint64_t(1) << 27;
+
+// How integer pixel values are decoded to linear (float files are always read as stored), and
+// the largest image read.
 struct ImageReadOptions {
   // "auto": the file's colour-space metadata (oiio:ColorSpace; sRGB if untagged PNG/JPEG), as
   // ReadImage(path); "linear": values as stored; "srgb": the sRGB curve; "gamma": v^gamma.
   std::string colorspace = "auto";
   double gamma = 2.2;  // with colorspace "gamma"
+  // Width x height the header may claim (0: no limit but the allocation limit); checked before
+  // any pixel is read, since a few compressed bytes can claim gigapixels. The tools' --max-pixels.
+  std::uint64_t max_pixels = kDefaultMaxImagePixels;
   void Check() const;  // names the bad field
 };
 

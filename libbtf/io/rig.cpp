@@ -1,7 +1,9 @@
 #include "libbtf/io/rig.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
+#include <cstring>
 #include <fstream>
 #include <set>
 #include <sstream>
@@ -148,9 +150,9 @@ void WriteJsonAtomic(const std::filesystem::path& path, const json& j) { WriteTe
 
 void Board::Check(const std::string& source) const {
   if (family.empty()) ThrowBadInput("'{}': board family is empty", source);
-  if (!(std::isfinite(sample_size_mm) && sample_size_mm >= 0))
-    ThrowBadInput("'{}': sample_size_mm must be a number >= 0 (0: a calibration target), found {}", source,
-                  sample_size_mm);
+  if (!(std::isfinite(sample_size_mm) && sample_size_mm >= 0 && sample_size_mm <= 2 * kMaxBoardMm))
+    ThrowBadInput("'{}': sample_size_mm must be a number from 0 (a calibration target) to {:g}, found {}", source,
+                  2 * kMaxBoardMm, sample_size_mm);
   if (border_bits < 1 || border_bits > 2) ThrowBadInput("'{}': border_bits must be 1 or 2, found {}", source, border_bits);
   if (markers.empty()) ThrowBadInput("'{}': the board has no markers", source);
   std::set<int> ids;
@@ -158,11 +160,16 @@ void Board::Check(const std::string& source) const {
     const Marker& m = markers[i];
     if (m.id < 0) ThrowBadInput("'{}': markers[{}]: id {} is negative", source, i, m.id);
     if (!ids.insert(m.id).second) ThrowBadInput("'{}': markers[{}]: duplicate marker id {}", source, i, m.id);
-    if (!std::isfinite(m.height_mm)) ThrowBadInput("'{}': markers[{}] (id {}): height_mm is not finite", source, i, m.id);
+    if (!(std::abs(m.height_mm) <= kMaxBoardMm))
+      ThrowBadInput("'{}': markers[{}] (id {}): height_mm is {}; it must be finite and within +-{:g} mm", source, i,
+                    m.id, m.height_mm, kMaxBoardMm);
     double area2 = 0;  // shoelace, twice the signed area
     for (int k = 0; k < 4; ++k) {
-      if (!m.corners_mm[k].allFinite())
-        ThrowBadInput("'{}': markers[{}] (id {}): corner {} is not finite", source, i, m.id, k);
+      const Vec2& p = m.corners_mm[k];
+      if (!(std::abs(p.x()) <= kMaxBoardMm && std::abs(p.y()) <= kMaxBoardMm))
+        ThrowBadInput("'{}': markers[{}] (id {}): corner {} is ({}, {}); corners must be finite and within +-{:g} mm "
+                      "of the origin",
+                      source, i, m.id, k, p.x(), p.y(), kMaxBoardMm);
       const Vec2& a = m.corners_mm[k];
       const Vec2& b = m.corners_mm[(k + 1) % 4];
       area2 += a.x() * b.y() - a.y() * b.x();
@@ -207,19 +214,42 @@ int CharucoDictionary(const std::string& name, const std::string& source) {
 
 }  // namespace
 
-Board MakeCharucoBoard(const CharucoDefinition& c, const std::string& source) {
+namespace {
+
+// A ChArUco definition, checked before OpenCV builds the board: CharucoBoard::create matches every
+// chessboard corner against every marker, so an absurd size costs seconds before a mismatch that
+// the sizes alone show. Fields are named as in Kalibr's YAML, or as in our board JSON with `json`.
+// Returns the dictionary's id.
+int CheckCharuco(const CharucoDefinition& c, const std::string& source, bool json = false) {
+  const auto name = [json](const char* yaml, const char* ours) { return json ? ours : yaml; };
   if (c.squares_x < 2 || c.squares_y < 2 || c.squares_x * static_cast<long>(c.squares_y) > 100000)
-    ThrowBadInput("'{}': fields 'squaresX' and 'squaresY' must be >= 2 (and at most 100000 squares)", source);
-  if (!(c.square_mm > 0)) ThrowBadInput("'{}': field 'squareSize' must be > 0 (metres)", source);
+    ThrowBadInput("'{}': fields '{}' and '{}' must be >= 2 (and at most 100000 squares), found {} x {}", source,
+                  name("squaresX", "charuco.squares_x"), name("squaresY", "charuco.squares_y"), c.squares_x,
+                  c.squares_y);
+  if (!(c.square_mm > 0 && 0.5 * std::max(c.squares_x, c.squares_y) * c.square_mm <= kMaxBoardMm))
+    ThrowBadInput("'{}': field '{}' must be > 0 {}, and the board must lie within +-{:g} mm of its centre", source,
+                  name("squareSize", "charuco.square_mm"), name("(metres)", "(mm)"), kMaxBoardMm);
   if (!(c.marker_mm > 0 && c.marker_mm < c.square_mm))
-    ThrowBadInput("'{}': field 'markerSize' must be > 0 and below squareSize", source);
+    ThrowBadInput("'{}': field '{}' must be > 0 and below {}", source, name("markerSize", "charuco.marker_mm"),
+                  name("squareSize", "square_mm"));
   const int dict = CharucoDictionary(c.dictionary, source);
+  // OpenCV 4.6 puts a marker in every white square: squares_x * squares_y / 2 of them, rounded down.
+  const long needed = c.squares_x * static_cast<long>(c.squares_y) / 2;
+  const int available =
+      cv::aruco::getPredefinedDictionary(static_cast<cv::aruco::PREDEFINED_DICTIONARY_NAME>(dict))->bytesList.rows;
+  if (needed > available)
+    ThrowBadInput("'{}': the board needs {} markers but {} has {}", source, needed, c.dictionary, available);
+  return dict;
+}
+
+}  // namespace
+
+Board MakeCharucoBoard(const CharucoDefinition& c, const std::string& source) {
+  const int dict = CheckCharuco(c, source);
   const cv::Ptr<cv::aruco::CharucoBoard> cb = cv::aruco::CharucoBoard::create(
       c.squares_x, c.squares_y, static_cast<float>(c.square_mm), static_cast<float>(c.marker_mm),
       cv::aruco::getPredefinedDictionary(static_cast<cv::aruco::PREDEFINED_DICTIONARY_NAME>(dict)));
-  if (static_cast<int>(cb->ids.size()) > cb->dictionary->bytesList.rows)
-    ThrowBadInput("'{}': the board needs {} markers but {} has {}", source, cb->ids.size(), c.dictionary,
-                  cb->dictionary->bytesList.rows);
+  BTF_CHECK(static_cast<long>(cb->ids.size()) == c.squares_x * static_cast<long>(c.squares_y) / 2);
   Board b;
   b.family = "aruco:" + c.dictionary;
   b.sample_size_mm = 0;
@@ -266,12 +296,70 @@ std::vector<std::uint8_t> ArucoMarkerModules(const std::string& dictionary, int 
 
 namespace {
 
+// OpenCV 4.6's YAML parser is not safe on arbitrary text: it recurses once per nesting level
+// without a bound (a file nested 40,000 levels deep overflowed the stack) and loops forever on
+// some short inputs with tags (found by fuzz_rig). A Kalibr target is one flat mapping of scalars,
+// so only that reaches the parser: every line is blank, a comment, "---", or `key: value` at
+// column 0 with a key of letters, digits and '_' and a value that is empty, quoted on the line, or
+// plain without brackets, braces, commas or a leading tag, anchor, alias or block indicator;
+// printable ASCII only. Nothing nests, so the parser's depth is 1.
+void CheckFlatYaml(const std::string& text, const std::filesystem::path& path) {
+  std::size_t line_start = 0;
+  for (int line = 1; line_start < text.size(); ++line) {
+    std::size_t end = text.find('\n', line_start);
+    if (end == std::string::npos) end = text.size();
+    std::string l = text.substr(line_start, end - line_start);
+    line_start = end + 1;
+    if (!l.empty() && l.back() == '\r') l.pop_back();
+    const auto fail = [&](const std::string& what) {
+      ThrowBadInput("'{}': line {} {}: a Kalibr target is one flat mapping of 'key: value' lines (no nesting, lists, "
+                    "tags or anchors)",
+                    path.string(), line, what);
+    };
+    for (const char ch : l)
+      if (!(ch == '\t' || (ch >= 0x20 && ch < 0x7f))) fail("holds a byte that is not printable ASCII");
+    const std::size_t first = l.find_first_not_of(" \t");
+    if (first == std::string::npos || l[first] == '#' || l == "---") continue;
+    if (first > 0) fail("is indented (a nested block)");
+    std::size_t i = 0;
+    while (i < l.size() && (std::isalnum(static_cast<unsigned char>(l[i])) || l[i] == '_')) ++i;
+    if (i == 0 || i >= l.size() || l[i] != ':' || (i + 1 < l.size() && l[i + 1] != ' ' && l[i + 1] != '\t'))
+      fail("is not 'key: value'");
+    i = l.find_first_not_of(" \t", i + 1);
+    if (i == std::string::npos || l[i] == '#') continue;  // an empty value
+    if (l[i] == '\'' || l[i] == '"') {
+      const char q = l[i];
+      for (++i; i < l.size() && l[i] != q; ++i)
+        if (q == '"' && l[i] == '\\') ++i;
+      if (i >= l.size()) fail("has a quoted value that does not end on the line");
+      i = l.find_first_not_of(" \t", i + 1);
+      if (i != std::string::npos && l[i] != '#') fail("has text after its quoted value");
+      continue;
+    }
+    if (std::strchr("!&*|>%@`?-", l[i]) && !(l[i] == '-' && i + 1 < l.size() && l[i + 1] != ' ' && l[i + 1] != '\t'))
+      fail(fmt::format("has a value starting with '{}' (a tag, anchor, alias, block or list)", l[i]));
+    std::size_t comment = l.find(" #", i);
+    comment = std::min(comment, l.find("\t#", i));
+    if (l.substr(i, comment == std::string::npos ? std::string::npos : comment - i).find_first_of("[]{},") !=
+        std::string::npos)
+      fail("has a flow collection ([ ] { } ,) in its value");
+  }
+}
+
+Board KalibrTargetFromYaml(const cv::FileStorage& fs, const std::filesystem::path& path);
+
 // Kalibr's target YAML through OpenCV's FileStorage (which wants a %YAML:1.0 directive first).
 Board ReadKalibrTarget(const std::filesystem::path& path) {
+  std::error_code ec;
+  const auto bytes = std::filesystem::file_size(path, ec);
+  if (!ec && bytes > kMaxBoardYamlBytes)
+    ThrowBadInput("'{}' is {} bytes; a Kalibr target file is a few lines (at most {} bytes are read)", path.string(),
+                  bytes, kMaxBoardYamlBytes);
   std::ifstream in(path);
   if (!in) ThrowIo("cannot open '{}': check that the file exists and is readable", path.string());
   std::stringstream text;
   text << in.rdbuf();
+  CheckFlatYaml(text.str(), path);
   cv::FileStorage fs;
   try {
     fs.open("%YAML:1.0\n" + text.str(), cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
@@ -279,6 +367,20 @@ Board ReadKalibrTarget(const std::filesystem::path& path) {
     ThrowBadInput("'{}': not valid YAML ({}; line numbers count one extra line)", path.string(), e.err);
   }
   if (!fs.isOpened()) ThrowBadInput("'{}': not valid YAML", path.string());
+  // OpenCV asserts (cv::Exception) where a top level is not a mapping (found by fuzz_rig).
+  try {
+    if (!fs.root().isMap())
+      ThrowBadInput("'{}': not a Kalibr target: the top level must be a mapping of fields (target_type: ...)",
+                    path.string());
+    return KalibrTargetFromYaml(fs, path);
+  } catch (const cv::Exception& e) {
+    ThrowBadInput("'{}': not a Kalibr target: every YAML document must be a mapping of fields ({})", path.string(),
+                  e.err);
+  }
+}
+
+// The fields of a parsed Kalibr target (ReadKalibrTarget).
+Board KalibrTargetFromYaml(const cv::FileStorage& fs, const std::filesystem::path& path) {
   const auto field = [&](const char* key) {
     const cv::FileNode n = fs[key];
     if (n.empty()) ThrowBadInput("'{}': missing required field '{}'", path.string(), key);
@@ -324,6 +426,9 @@ Board ReadKalibrTarget(const std::filesystem::path& path) {
                   g.rows, g.cols);
   if (!(g.tag_size_mm > 0)) ThrowBadInput("'{}': field 'tagSize' must be > 0 (metres)", path.string());
   if (!(g.spacing > 0 && g.spacing < 10)) ThrowBadInput("'{}': field 'tagSpacing' must be in (0, 10) (gap / tag size)", path.string());
+  if (!(0.5 * std::max(g.rows, g.cols) * g.tag_size_mm * (1 + g.spacing) <= kMaxBoardMm))
+    ThrowBadInput("'{}': fields 'tagSize' ({:g} m) and 'tagSpacing' give a grid reaching past +-{:g} mm of its centre",
+                  path.string(), g.tag_size_mm / 1000, kMaxBoardMm);
   // Optional extensions (not Kalibr's): the family and border (Kalibr: tag36h11, 2 bits).
   std::string family = "tag36h11";
   int border = 2;
@@ -356,6 +461,7 @@ Board ReadBoard(const std::filesystem::path& path) {
     b.charuco.square_mm = c["square_mm"].Double();
     b.charuco.marker_mm = c["marker_mm"].Double();
     b.charuco.dictionary = c["dictionary"].String();
+    CheckCharuco(b.charuco, path.string(), /*json=*/true);
   }
   if (root.Has("aprilgrid")) {
     const Node g = root["aprilgrid"];
@@ -365,6 +471,10 @@ Board ReadBoard(const std::filesystem::path& path) {
     b.grid.spacing = g["spacing"].Double();
     b.grid.first_id = g.Has("first_id") ? g["first_id"].Int() : 0;
     if (!b.grid.valid() || !(b.grid.tag_size_mm > 0) || !(b.grid.spacing > 0)) g.Fail("rows, cols, tag_size_mm and spacing must be > 0");
+    if (b.grid.rows * static_cast<long>(b.grid.cols) > 100000 ||
+        !(0.5 * std::max(b.grid.rows, b.grid.cols) * b.grid.tag_size_mm * (1 + b.grid.spacing) <= kMaxBoardMm))
+      g.Fail(fmt::format("rows x cols must be at most 100000 tags and the grid must lie within +-{:g} mm of its centre",
+                         kMaxBoardMm));
   }
   const Node ms = root["markers"];
   const std::size_t n = ms.ArraySize();

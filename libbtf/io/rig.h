@@ -21,6 +21,12 @@
 
 namespace btf {
 
+// Board coordinates and sizes (mm) lie within +-kMaxBoardMm (1 km) of the origin; board readers
+// refuse others (bad input) before any geometry is computed with them.
+inline constexpr double kMaxBoardMm = 1e6;
+// Kalibr target YAML: at most this many bytes, one flat mapping (docs/format.md, "Rig files").
+inline constexpr std::size_t kMaxBoardYamlBytes = std::size_t(1) << 20;
+
 struct Marker {
   int id = 0;
   // Corners in plate mm, in AprilTag's order for the upright tag: left-bottom, right-bottom,

@@ -1,5 +1,7 @@
 #include "libbtf/io/image_io.h"
 
+#include <sys/resource.h>
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -99,6 +101,89 @@ TEST(ImageIo, ExrAttributeClaimingMoreThanTheFileIsRefused) {
     EXPECT_NE(what.find("'channels'"), std::string::npos) << what;
   }
   EXPECT_EQ(ReadImage(dir / "ok.exr").width, 5);  // the walk accepts what we write
+}
+
+// ---- claimed sizes (ImageReadOptions::max_pixels) ----
+
+std::uint32_t Crc32(const std::string& bytes) {  // PNG's CRC (ISO 3309), bit by bit
+  std::uint32_t c = 0xffffffffu;
+  for (unsigned char b : bytes) {
+    c ^= b;
+    for (int k = 0; k < 8; ++k) c = (c >> 1) ^ (0xedb88320u & (0u - (c & 1u)));
+  }
+  return c ^ 0xffffffffu;
+}
+
+std::string Be32(std::uint32_t v) {
+  return {char(v >> 24), char(v >> 16), char(v >> 8), char(v)};
+}
+
+std::string PngChunk(const std::string& type, const std::string& data) {
+  return Be32(std::uint32_t(data.size())) + type + data + Be32(Crc32(type + data));
+}
+
+// A 69-byte PNG whose header claims width x height 8-bit RGB pixels; its one IDAT holds a
+// 12-byte zlib stream (a valid header and deflate block, far too short for the image).
+std::string ClaimingPng(std::uint32_t width, std::uint32_t height) {
+  const std::string ihdr = Be32(width) + Be32(height) + std::string("\x08\x02\x00\x00\x00", 5);
+  const std::string idat("\x78\x9c\x63\x60\x00\x00\x00\x02\x00\x01\x00\x00", 12);
+  return std::string("\x89PNG\r\n\x1a\n", 8) + PngChunk("IHDR", ihdr) + PngChunk("IDAT", idat) + PngChunk("IEND", "");
+}
+
+double PeakRssBytes() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return double(u.ru_maxrss) * 1024;
+}
+
+template <typename F>
+std::string BadInput(F f) {
+  try {
+    f();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ExitCode::kBadInput) << e.what();
+    return e.what();
+  }
+  ADD_FAILURE() << "no error";
+  return "";
+}
+
+// A few bytes can claim gigapixels (a 30000 x 30000 RGB image as float: 10 GB): the header's size
+// is checked against max_pixels before any pixel is allocated or read, and the message says what
+// to pass.
+TEST(ImageIo, HeaderClaimingMorePixelsThanTheLimitIsRefusedBeforeReading) {
+  const auto dir = test::TempDir();
+  const std::string png = ClaimingPng(30000, 30000);
+  ASSERT_EQ(png.size(), 69u);
+  std::ofstream(dir / "huge.png", std::ios::binary) << png;
+  const double before = PeakRssBytes();
+  std::string what = BadInput([&] { ReadImage(dir / "huge.png"); });
+  EXPECT_LT(PeakRssBytes() - before, 64.0 * (1 << 20));
+  for (const char* part : {"huge.png", "30000 x 30000 = 900000000 pixels", "over the limit of 134217728",
+                           "pass --max-pixels 900000000"})
+    EXPECT_NE(what.find(part), std::string::npos) << what << " / " << part;
+  // From memory (an entry of a zip archive) the same.
+  what = BadInput([&] { DecodeImage("set.zip:huge.png", png); });
+  EXPECT_NE(what.find("set.zip:huge.png"), std::string::npos) << what;
+  // Raised above the claim, the file is read, and found to be short: still bad input, no crash.
+  ImageReadOptions small;
+  small.max_pixels = 1000;
+  std::ofstream(dir / "short.png", std::ios::binary) << ClaimingPng(30, 30);
+  what = BadInput([&] { ReadImage(dir / "short.png", small); });
+  EXPECT_EQ(what.find("--max-pixels"), std::string::npos) << what;
+}
+
+TEST(ImageIo, MaxPixelsIsInclusiveAndZeroMeansNoLimit) {
+  const auto dir = test::TempDir();
+  WriteImage(dir / "r.png", Ramp(64, 48, 3));
+  ImageReadOptions o;
+  o.max_pixels = 64 * 48;
+  EXPECT_EQ(ReadImage(dir / "r.png", o).width, 64);
+  o.max_pixels = 64 * 48 - 1;
+  EXPECT_NE(BadInput([&] { ReadImage(dir / "r.png", o); }).find("pass --max-pixels 3072"), std::string::npos);
+  o.max_pixels = 0;
+  EXPECT_EQ(ReadImage(dir / "r.png", o).height, 48);
+  EXPECT_EQ(ImageReadOptions().max_pixels, std::uint64_t(1) << 27);
 }
 
 }  // namespace

@@ -173,6 +173,12 @@ TEST(ImageSet, BadSetsAreRefusedNamingTheFiles) {
     EXPECT_NE(e.find(words), std::string::npos) << e;
     EXPECT_FALSE(std::filesystem::exists(dir / "out.h5"));
   };
+  // An image larger than --max-pixels (4 x 3 = 12 pixels each) is refused before it is read.
+  ConvertOptions small = p;
+  small.max_pixels = 11;
+  refused(small, "claims 4 x 3 = 12 pixels, over the limit of 11 (--max-pixels)");
+  small.max_pixels = 12;
+  ImportImageSet(small, set, dir / "ok12.h5");
   // Another image of a different size; then the same (view, light) under two names.
   WriteImage(set / "tl30_pl30_tv15_pv60.exr", KnownImage(1, 1, 5, 3));
   refused(p, "tl30_pl30_tv15_pv60.exr' is 5 x 3 with 3 channels");

@@ -1,4 +1,5 @@
 // Board files other than ours (Kalibr AprilGrid YAML), the camera file, and their bad-input errors.
+#include <chrono>
 #include <fstream>
 
 #include <gtest/gtest.h>
@@ -78,8 +79,8 @@ TEST(RigBoards, CharucoYamlGivesItsMarkersCentredWithYUp) {
 
 TEST(RigBoards, BadBoardFilesNameFileAndField) {
   const auto dir = test::TempDir();
-  Write(dir / "syntax.yaml", "target_type: [aprilgrid\n");
-  EXPECT_NE(BoardError(dir / "syntax.yaml").find("not valid YAML"), std::string::npos);
+  Write(dir / "syntax.yaml", "target_type: 'aprilgrid\n");
+  EXPECT_NE(BoardError(dir / "syntax.yaml").find("line 1 has a quoted value that does not end"), std::string::npos);
   Write(dir / "missing.yaml", "target_type: aprilgrid\ntagCols: 6\ntagRows: 6\ntagSpacing: 0.3\n");
   EXPECT_NE(BoardError(dir / "missing.yaml").find("missing required field 'tagSize'"), std::string::npos);
   Write(dir / "type.yaml", "target_type: checkerboard\ntargetCols: 6\n");
@@ -103,6 +104,104 @@ TEST(RigBoards, BadBoardFilesNameFileAndField) {
         R"({"format": "libbtf-board", "format_version": "1.0.0", "family": "tag36h11", "sample_size_mm": 40,
             "border_bits": 3, "markers": [{"id": 0, "corners_mm": [[0,0],[1,0],[1,1],[0,1]]}]})");
   EXPECT_NE(BoardError(dir / "b.json").find("border_bits must be 1 or 2"), std::string::npos);
+}
+
+// OpenCV's YAML parser recurses once per level: a Kalibr file nested 40,000 deep overflowed the
+// stack (exit 139). Only a flat mapping reaches the parser: nesting in flow and block style, and
+// what else a Kalibr target never holds (tags, lists, control bytes), is refused before parsing.
+TEST(RigBoards, DeeplyNestedYamlIsRefusedBeforeParsing) {
+  const auto dir = test::TempDir();
+  const std::string flat = "target_type: aprilgrid\ntagCols: 6\ntagRows: 6\ntagSize: 0.088\ntagSpacing: 0.3\n";
+  Write(dir / "flow.yaml", flat + "extra: " + std::string(40000, '[') + std::string(40000, ']') + "\n");
+  Write(dir / "block.yaml", flat + "extra:\n");
+  {
+    std::ofstream f(dir / "block.yaml", std::ios::app);
+    for (int i = 0; i < 40000; ++i) f << "- ";
+    f << "x\n";
+  }
+  Write(dir / "mapping.yaml", flat + "extra: {a: " + std::string(40000, '{') + "}\n");
+  Write(dir / "indent.yaml", flat + "extra:\n" + std::string(100, ' ') + "a: 1\n");
+  Write(dir / "tag.yaml", flat + "extra: !!str x\n");
+  Write(dir / "ctrl.yaml", flat + "extra: a\x12" "b\n");
+  for (const auto& [name, problem] : std::vector<std::pair<std::string, std::string>>{
+           {"flow.yaml", "line 6 has a flow collection"},
+           {"block.yaml", "line 7 is not 'key: value'"},
+           {"mapping.yaml", "line 6 has a flow collection"},
+           {"indent.yaml", "line 7 is indented"},
+           {"tag.yaml", "line 6 has a value starting with '!'"},
+           {"ctrl.yaml", "line 6 holds a byte that is not printable ASCII"}}) {
+    const std::string what = BoardError(dir / name);
+    EXPECT_NE(what.find(name + "': " + problem), std::string::npos) << what;
+    EXPECT_NE(what.find("a Kalibr target is one flat mapping"), std::string::npos) << what;
+  }
+  // Brackets, commas and dashes inside quoted text or comments, negative numbers and "---" are fine.
+  Write(dir / "quoted.yaml", "---\n" + flat + "note: '" + std::string(200, '[') + "' # [x, y]\nother: \"- - {{ \\\" [[[\"\n" +
+                                 "offset: -0.5 # a comment, with {braces}\nempty:\n\n   \n# end\n");
+  EXPECT_EQ(ReadBoard(dir / "quoted.yaml").markers.size(), 36u);
+  // A file far beyond any target's size is not parsed.
+  Write(dir / "big.yaml", flat + "# " + std::string(2 << 20, 'x') + "\n");
+  EXPECT_NE(BoardError(dir / "big.yaml").find("at most 1048576 bytes"), std::string::npos);
+}
+
+// Found by fuzz_rig: a YAML whose top level is not a mapping made OpenCV assert in
+// FileStorage::operator[] (exit 5), and a 26-byte one made its parser loop forever. Both are bad
+// input naming the file, at once; so is a file with no mapping at all.
+TEST(RigBoards, YamlThatIsNoFlatMappingIsBadInputAtOnce) {
+  const auto dir = test::TempDir();
+  Write(dir / "seq.yaml", "- target_type: aprilgrid\n- tagCols: 6\n");
+  Write(dir / "assert.yaml", std::string(44, '-') + "\xff\xff" + std::string(18, '-') + "\n!");
+  Write(dir / "loop.yaml", "-----,C--\n!---\n!");
+  Write(dir / "empty.yaml", "# nothing\n");
+  const auto t0 = std::chrono::steady_clock::now();
+  for (const char* name : {"seq.yaml", "assert.yaml", "loop.yaml"})
+    EXPECT_NE(BoardError(dir / name).find(std::string(name) + "': line 1 "), std::string::npos) << name;
+  EXPECT_NE(BoardError(dir / "empty.yaml").find("empty.yaml': not a Kalibr target"), std::string::npos);
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 2.0);
+}
+
+// A ChArUco board whose dictionary is too small is refused from its sizes, before OpenCV builds
+// the board (which matched ~10^5 corners against ~5 x 10^4 markers: 15-20 s for 115 bytes).
+TEST(RigBoards, CharucoBoardTooLargeForItsDictionaryIsRefusedAtOnce) {
+  const auto dir = test::TempDir();
+  Write(dir / "c.yaml", "target_type: charuco\nsquaresX: 316\nsquaresY: 316\nsquareSize: 0.04\nmarkerSize: 0.03\n"
+                        "dictionary: DICT_4X4_50\n");
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::string what = BoardError(dir / "c.yaml");
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 2.0);
+  EXPECT_NE(what.find("c.yaml': the board needs 49928 markers but DICT_4X4_50 has 50"), std::string::npos) << what;
+  // Our board JSON's charuco block is checked the same way, naming its own fields.
+  Write(dir / "c.json",
+        R"({"format": "libbtf-board", "format_version": "1.0.0", "family": "aruco:DICT_4X4_50", "sample_size_mm": 0,
+            "charuco": {"squares_x": 1, "squares_y": 7, "square_mm": 40, "marker_mm": 30, "dictionary": "DICT_4X4_50"},
+            "markers": [{"id": 0, "corners_mm": [[0,0],[1,0],[1,1],[0,1]]}]})");
+  EXPECT_NE(BoardError(dir / "c.json").find("fields 'charuco.squares_x' and 'charuco.squares_y'"), std::string::npos);
+}
+
+// Finite but absurd coordinates (1e308 mm) passed every check and reached OpenCV, which asserted
+// (exit 5). Board coordinates and sizes must lie within 1 km of the origin: refused as bad input
+// naming the file and the item.
+TEST(RigBoards, AbsurdCoordinatesAndSizesAreBadInputNamingTheField) {
+  const auto dir = test::TempDir();
+  const auto board = [&](const std::string& corners, const std::string& extra = "") {
+    Write(dir / "b.json", R"({"format": "libbtf-board", "format_version": "1.0.0", "family": "tag36h11",
+                             "sample_size_mm": 40, "markers": [{"id": 0, "corners_mm": [[0,0],[1,0],[1,1],[0,1]]},
+                             {"id": 7, "corners_mm": )" + corners + "}" + extra + "]}");
+    return BoardError(dir / "b.json");
+  };
+  std::string what = board("[[0,0],[1e308,0],[1,1],[0,1]]");
+  EXPECT_NE(what.find("b.json': markers[1] (id 7): corner 1 is (1e+308, 0)"), std::string::npos) << what;
+  EXPECT_NE(what.find("within +-1e+06 mm"), std::string::npos) << what;
+  what = board(R"([[0,0],[1,0],[1,1],[0,1]], "height_mm": -2e6)");
+  EXPECT_NE(what.find("markers[1] (id 7): height_mm is -2000000"), std::string::npos) << what;
+  EXPECT_EQ(board("[[0,0],[1e6,0],[1e6,1e6],[0,1e6]]"), "");  // 1 km is still a board
+  const std::string grid = "target_type: aprilgrid\ntagCols: 6\ntagRows: 6\ntagSpacing: 0.3\ntagSize: ";
+  Write(dir / "g.yaml", grid + "1e300\n");
+  EXPECT_NE(BoardError(dir / "g.yaml").find("fields 'tagSize' (1e+300 m) and 'tagSpacing'"), std::string::npos);
+  Write(dir / "g.yaml", grid + "300\n");  // 6 x 390 m = 2.3 km wide
+  EXPECT_NE(BoardError(dir / "g.yaml").find("reaching past +-1e+06 mm"), std::string::npos);
+  Write(dir / "s.yaml", "target_type: charuco\nsquaresX: 5\nsquaresY: 7\nsquareSize: 1e300\nmarkerSize: 1e299\n"
+                        "dictionary: DICT_5X5_100\n");
+  EXPECT_NE(BoardError(dir / "s.yaml").find("field 'squareSize' must be > 0 (metres)"), std::string::npos);
 }
 
 TEST(RigBoards, CameraFileRoundTripAndErrors) {

@@ -10,22 +10,22 @@
 namespace btf {
 namespace {
 
-std::string Run(const std::string& command, int expected_code) {
+std::string Output(const std::string& command, int expected_code) {
   std::string out;
   EXPECT_EQ(test::RunCommand(command + " 2>&1", &out), expected_code) << command << "\n" << out;
   return out;
 }
 
 TEST(Messages, MistypedOptionsAndCommandsGetTheNearestName) {
-  const std::string metod = Run(test::Tool("btf-compress") + " in.h5 --metod lpca -o out.h5", 2);
+  const std::string metod = Output(test::Tool("btf-compress") + " in.h5 --metod lpca -o out.h5", 2);
   EXPECT_NE(metod.find("btf-compress: error: unknown option '--metod' (did you mean '--method'?)"), std::string::npos)
       << metod;
   EXPECT_NE(metod.find("see btf-compress --help"), std::string::npos) << metod;
-  const std::string comapre = Run(test::Tool("btf-eval") + " comapre a.h5 b.h5", 2);
+  const std::string comapre = Output(test::Tool("btf-eval") + " comapre a.h5 b.h5", 2);
   EXPECT_NE(comapre.find("did you mean 'compare'?"), std::string::npos) << comapre;
-  const std::string foo = Run(test::Tool("btf-eval") + " foo", 2);
+  const std::string foo = Output(test::Tool("btf-eval") + " foo", 2);
   EXPECT_NE(foo.find("compare"), std::string::npos) << foo;  // lists the commands
-  const std::string none = Run(test::Tool("btf-eval"), 2);
+  const std::string none = Output(test::Tool("btf-eval"), 2);
   EXPECT_NE(none.find("a command is required: one of"), std::string::npos) << none;
   EXPECT_NE(none.find("sweep"), std::string::npos) << none;
 }
@@ -34,7 +34,7 @@ TEST(Messages, OptionChecksSayWhatTheOptionMustBeInWords) {
   const auto dir = test::TempDir();
   const std::string in = (dir / "in.h5").string();
   ASSERT_EQ(test::RunCommand(test::Tool("btf-synth") + " btf --views 0,1 --lights 0,1 --resolution 4 --samples 1 --quiet -o " + in), 0);
-  const std::string out = Run(test::Tool("btf-compress") + " " + in + " --method lpca --lpca-matrix double -o " +
+  const std::string out = Output(test::Tool("btf-compress") + " " + in + " --method lpca --lpca-matrix double -o " +
                                   (dir / "c.h5").string(),
                               2);
   EXPECT_NE(out.find("invalid option 'lpca_matrix'"), std::string::npos) << out;

@@ -95,6 +95,9 @@ int main(int argc, char** argv) {
                "Image sets: mark missing (view, light) images missing in the dataset (values 0) instead of failing");
   app.add_option("--directions", o.directions,
                  "Image sets: all (the layout's whole sampling) or present (only the views and lights with images)");
+  app.add_option("--max-pixels", o.max_pixels,
+                 "Image sets: refuse an image whose header claims more pixels (width x height), before reading it (0 = "
+                 "no limit)");
   app.add_option("--components,-c", f.fmf.components,
                  "FMF/DFMF output: components of the truncated SVD (per YUV channel for DFMF); clamped to the rank");
   app.add_option("--power-iterations", f.fmf.power_iterations, "FMF/DFMF output: power iterations of the randomised SVD");

@@ -240,6 +240,8 @@ int main(int argc, char** argv) {
     c->add_option("--colorspace", in.colorspace,
                   "Decoding of integer images: auto (file metadata) | linear | srgb | gamma");
     c->add_option("--input-gamma", gamma, "Decode integer images as value^G (implies --colorspace gamma)");
+    c->add_option("--max-pixels", in.max_pixels,
+                  "Refuse an image whose header claims more pixels (width x height), before reading it (0 = no limit)");
   };
 
   // detect
