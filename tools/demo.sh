@@ -2,7 +2,8 @@
 # The main job on the bundled sample data; called by `./run demo` as: demo.sh BIN SAMPLE_DATA OUT.
 # Part 1, measurement: 12 photos -> btf-register -> dataset, compared with its ground truth.
 # Part 2, compression: a full Bonn-81 ground-truth BTF (81 views x 81 lights) -> btf-compress and
-# btf-eval sweep (three codecs: ratio, error, time, rendered comparison, HTML report) -> export.
+# btf-eval sweep (four codecs, the neural one among them: ratio, error, time, rendered comparison,
+# HTML report) -> export.
 # About 1.5 minutes on a shared 2-core machine (docs/btf-eval.md, "The demo").
 set -euo pipefail
 bin=$1 data=$2 out=$3
@@ -33,7 +34,7 @@ step "4/7 btf-synth: full Bonn-81 ground truth, Irawan 2006 twill, 81 views x 81
 step "5/7 btf-compress: per-view PCA, 8 components per view"
 "$bin/btf-compress" "$out/twill81.h5" --method pca-view --components 8 -o "$out/codec_pca_view.h5" --quiet
 
-step "6/7 btf-eval sweep: per-view PCA c = 8, LPCA and lpca-tensor k = 8, c = 8: error, size, time, renders, report"
+step "6/7 btf-eval sweep: per-view PCA c = 8, LPCA and lpca-tensor k = 8, c = 8, neural latent 8: error, size, time, renders, report"
 "$bin/btf-eval" sweep "$out/twill81.h5" -o "$out/sweep" --components 8 --clusters 8 --runs 1 --no-ssim \
   --quiet >"$out/sweep_table.txt"
 
