@@ -4,7 +4,8 @@
 # Part 2, compression: a full Bonn-81 ground-truth BTF (81 views x 81 lights) -> btf-compress and
 # btf-eval sweep (four codecs, the neural one among them: ratio, error, time, rendered comparison,
 # HTML report) -> export.
-# About 1.5 minutes on a shared 2-core machine (docs/btf-eval.md, "The demo").
+# About 1.5 minutes on an idle 2-core machine before the neural codec joined the sweep, 5 minutes
+# with it at load average 5-8 (docs/btf-eval.md, "The demo"; docs/performance.md).
 set -euo pipefail
 bin=$1 data=$2 out=$3
 photos=$data/photos
