@@ -76,6 +76,7 @@ compress() {
   local in=$1 codec=$2
   shift 2
   [ "${REUSE:-0}" = 1 ] && [ -f "$codec" ] && [ -f "${codec%.h5}.json" ] && return 0
+  load >"${codec%.h5}.load"  # the load average when it started, for the tables
   "$bin/btf-compress" "$in" "$@" -o "$codec" --json --quiet >"${codec%.h5}.json" 2>"${codec%.h5}.err"
 }
 # rel REFERENCE CODEC: btf-eval compare's relative L2 error (decoded at REFERENCE's directions).
@@ -93,14 +94,16 @@ if want quality; then
   for m in $materials; do
     gt="$out/$m.h5"
     synth "$m" "$gt"
-    t0=$SECONDS l0=$(load)
+    t0=$SECONDS
     compress "$gt" "$out/${m}_tensor.h5" --method lpca-tensor --bytes "$tensor_bytes"
+    l0=$(cat "$out/${m}_tensor.load" 2>/dev/null || echo -)
     tb=$(json "$out/${m}_tensor.json" codec_bytes) te=$(json "$out/${m}_tensor.json" relative_error)
     say "$(printf '%-8s %-34s %12s %10.6f %9s %9d %6s' "$m" "lpca-tensor --bytes $tensor_bytes" "$tb" "$te" - $((SECONDS - t0)) "$l0")"
     for c in $latents; do
-      t0=$SECONDS l0=$(load)
+      t0=$SECONDS
       # shellcheck disable=SC2086
       compress "$gt" "$out/${m}_neural_c$c.h5" --method neural --neural-latent "$c" $neural_flags
+      l0=$(cat "$out/${m}_neural_c$c.load" 2>/dev/null || echo -)
       nb=$(json "$out/${m}_neural_c$c.json" codec_bytes) ne=$(json "$out/${m}_neural_c$c.json" relative_error)
       ts=$(json "$out/${m}_neural_c$c.json" seconds.train)
       say "$(printf '%-8s %-34s %12s %10.6f %9.1f %9d %6s' "$m" "neural --neural-latent $c" "$nb" "$ne" "$ts" $((SECONDS - t0)) "$l0")"
@@ -134,9 +137,9 @@ EOF
     synth "$m" "$out/${m}_held.h5" --directions bonn81 --views "$odd" --lights "$odd"
     synth "$m" "$out/${m}_random.h5" --directions "$out/random_dirs.txt"
     c=${neural_latent[$m]:-${HELD_OUT_LATENT:-8}}
-    l0=$(load)
     # shellcheck disable=SC2086
     compress "$out/${m}_train.h5" "$out/${m}_sub_neural.h5" --method neural --neural-latent "$c" $neural_flags
+    l0=$(cat "$out/${m}_sub_neural.load" 2>/dev/null || echo -)
     nb=$(json "$out/${m}_sub_neural.json" codec_bytes)
     say "$(printf '%-8s %-42s %10s %10.6f %10.6f %10.6f %9.1f %6s' "$m" "neural --neural-latent $c" "$nb" \
       "$(json "$out/${m}_sub_neural.json" relative_error)" "$(rel "$out/${m}_held.h5" "$out/${m}_sub_neural.h5")" \
