@@ -35,6 +35,7 @@
 #include "libbtf/compress/pca.h"
 #include "libbtf/io/dataset_io.h"
 #include "libbtf/io/half.h"
+#include "bench/bench_main.h"
 #include "bench/synthetic_btf.h"
 
 namespace {
@@ -71,21 +72,7 @@ double& GemmRate(bool dbl) {
 
 template <typename Scalar>
 void BM_EigenGemm(benchmark::State& st) {
-  using M = Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic>;
-  const int n = 1024;
-  M a = M::Random(n, n), b = M::Random(n, n), c(n, n);
-  double secs = 0;
-  int reps = 0;
-  for (auto _ : st) {
-    const auto t0 = std::chrono::steady_clock::now();
-    c.noalias() = a * b;
-    benchmark::DoNotOptimize(c.data());
-    secs += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    ++reps;
-  }
-  const double gflops = 2.0 * n * n * n * reps / secs / 1e9;
-  GemmRate(sizeof(Scalar) == 8) = gflops;
-  st.counters["GFLOPs"] = gflops;
+  GemmRate(sizeof(Scalar) == 8) = btf::bench::EigenGemmRate<Scalar>(st);
 }
 BENCHMARK_TEMPLATE(BM_EigenGemm, float)->Unit(benchmark::kMillisecond)->MinTime(2.0)->UseRealTime();
 BENCHMARK_TEMPLATE(BM_EigenGemm, double)->Unit(benchmark::kMillisecond)->MinTime(2.0)->UseRealTime();
@@ -678,4 +665,3 @@ const bool g_codec_files_registered = [] {
 
 }  // namespace
 
-#include "bench/bench_main.h"

@@ -1,11 +1,15 @@
 // The neural codec's core (libbtf/compress/neural_net.h):
-//   BM_NeuralEigenGemm: Eigen's float GEMM at 1024^3, the machine's yardstick (as in bench_compress);
+//   BM_NeuralEigenGemm: Eigen's float GEMM at 1024^3 on one thread, the machine's yardstick
+//     (bench_main.h, as in bench_compress);
 //   BM_NeuralGemmShapes: the same products one training step makes (forward and backward of a
 //     14-32-32-3 decoder over 16 blocks of 256 samples) as bare Eigen GEMMs: the best the step
 //     can do with Eigen's kernels on these thin shapes;
 //   BM_NeuralStep/threads: one training step (forward, backward, reduction, Adam) at batch 4096,
 //     with its GFLOP/s as a fraction of both rates above (measured earlier in the same run) and
 //     samples/s;
+//   BM_NeuralDecode/hidden/threads: the codec's decoder (NeuralCodecModel::DecodeImages, what
+//     Codec::DecodeViewSlot runs) over one view slot of 128 x 128 texels x 81 lights, RGB, latent 8,
+//     two hidden layers of the given width: decoded values per second, and per core;
 //   BM_NeuralFit/activation/encoding/steps: training on the synthetic lobes of
 //     tests/compress/neural_lobes.h (64 texels x 256 direction pairs, batch 1024), one thread,
 //     three seeds: the held-out RMSE (log domain; other direction pairs of the same texels) and
@@ -21,6 +25,9 @@
 #include <Eigen/Core>
 #include <benchmark/benchmark.h>
 
+#include "bench/bench_main.h"
+#include "libbtf/compress/neural_codec.h"
+#include "libbtf/core/directions.h"
 #include "libbtf/compress/neural_net.h"
 #include "tests/compress/neural_lobes.h"
 
@@ -52,21 +59,11 @@ double StepFlops() {
   return per_sample * kBatch;
 }
 
+// One thread from here on (the shapes below and the fits run on one; BM_NeuralStep and
+// BM_NeuralDecode set their own count and return to one).
 void BM_NeuralEigenGemm(benchmark::State& st) {
-  const int n = 1024;
-  Eigen::MatrixXf a = Eigen::MatrixXf::Random(n, n), b = Eigen::MatrixXf::Random(n, n), c(n, n);
   omp_set_num_threads(1);
-  double secs = 0;
-  long reps = 0;
-  for (auto _ : st) {
-    const auto t0 = std::chrono::steady_clock::now();
-    c.noalias() = a * b;
-    benchmark::DoNotOptimize(c.data());
-    secs += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    ++reps;
-  }
-  EigenRate() = 2.0 * n * n * double(n) * reps / secs / 1e9;
-  st.counters["GFLOPs"] = EigenRate();
+  EigenRate() = btf::bench::EigenGemmRate<float>(st);
 }
 BENCHMARK(BM_NeuralEigenGemm)->Unit(benchmark::kMillisecond)->MinTime(2.0)->UseRealTime();
 
@@ -133,6 +130,43 @@ void BM_NeuralStep(benchmark::State& st) {
 }
 BENCHMARK(BM_NeuralStep)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->MinTime(2.0)->UseRealTime();
 
+void BM_NeuralDecode(benchmark::State& st) {
+  const int hidden = int(st.range(0)), threads = int(st.range(1));
+  constexpr int kTexels = 128 * 128, kLights = 81;
+  btf::NeuralCodecModel m;
+  m.latent = kLatent;
+  m.latents = Eigen::MatrixXf::Random(kLatent, kTexels);
+  btf::NeuralNetShape shape;
+  shape.inputs = kLatent + m.encoding.Width();
+  shape.hidden = {hidden, hidden};
+  shape.outputs = 3;
+  m.net = btf::NeuralNet(shape, 1);
+  std::vector<float> wi, wo;
+  const btf::Sampling bonn = btf::Sampling::Bonn81();
+  for (int l = 0; l < kLights; ++l)
+    for (int k = 0; k < 3; ++k) wi.push_back(float(bonn[l][k])), wo.push_back(float(bonn[7][k]));
+  std::vector<float> out(std::size_t(kLights) * kTexels * 3);
+  omp_set_num_threads(threads);
+  double secs = 0;
+  long reps = 0;
+  for (auto _ : st) {
+    const auto t0 = std::chrono::steady_clock::now();
+    m.DecodeImages(kLights, wi.data(), wo.data(), out.data());
+    benchmark::DoNotOptimize(out.data());
+    secs += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    ++reps;
+  }
+  omp_set_num_threads(1);
+  const double values = double(out.size()) * double(reps) / secs;
+  st.counters["values_per_s"] = values;
+  st.counters["values_per_s_per_core"] = values / threads;
+}
+BENCHMARK(BM_NeuralDecode)
+    ->ArgsProduct({{16, 32}, {1, 2}})
+    ->Unit(benchmark::kMillisecond)
+    ->MinTime(1.0)
+    ->UseRealTime();
+
 // The process's CPU seconds: on a shared machine, the time a one-thread training took without
 // the waits for the CPU that other processes cause.
 double CpuSeconds() {
@@ -187,4 +221,3 @@ BENCHMARK(BM_NeuralFit)
 
 }  // namespace
 
-#include "bench/bench_main.h"

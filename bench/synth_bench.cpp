@@ -9,6 +9,7 @@
 #include <benchmark/benchmark.h>
 #include <omp.h>
 
+#include "bench/bench_main.h"
 #include "libbtf/synth/btf_generator.h"
 #include "libbtf/synth/irawan2006.h"
 #include "libbtf/synth/photo_synth.h"
@@ -95,4 +96,3 @@ BENCHMARK(BM_Photo1280x960)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTi
 
 }  // namespace
 
-#include "bench/bench_main.h"

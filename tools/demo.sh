@@ -2,8 +2,10 @@
 # The main job on the bundled sample data; called by `./run demo` as: demo.sh BIN SAMPLE_DATA OUT.
 # Part 1, measurement: 12 photos -> btf-register -> dataset, compared with its ground truth.
 # Part 2, compression: a full Bonn-81 ground-truth BTF (81 views x 81 lights) -> btf-compress and
-# btf-eval sweep (three codecs: ratio, error, time, rendered comparison, HTML report) -> export.
-# About 1.5 minutes on a shared 2-core machine (docs/btf-eval.md, "The demo").
+# btf-eval sweep (four codecs, the neural one among them: ratio, error, time, rendered comparison,
+# HTML report) -> export.
+# About 1.5 minutes on an idle 2-core machine before the neural codec joined the sweep, 5 minutes
+# with it at load average 5-8 (docs/btf-eval.md, "The demo"; docs/performance.md).
 set -euo pipefail
 bin=$1 data=$2 out=$3
 photos=$data/photos
@@ -33,9 +35,10 @@ step "4/7 btf-synth: full Bonn-81 ground truth, Irawan 2006 twill, 81 views x 81
 step "5/7 btf-compress: per-view PCA, 8 components per view"
 "$bin/btf-compress" "$out/twill81.h5" --method pca-view --components 8 -o "$out/codec_pca_view.h5" --quiet
 
-step "6/7 btf-eval sweep: per-view PCA c = 8, LPCA and lpca-tensor k = 8, c = 8: error, size, time, renders, report"
+step "6/7 btf-eval sweep: per-view PCA c = 8, LPCA and lpca-tensor k = 8, c = 8, neural latent 8: error, size, time, renders, report"
+# The neural codec with a short training (2^20 samples, 4 epochs: 1024 steps), to keep the demo fast.
 "$bin/btf-eval" sweep "$out/twill81.h5" -o "$out/sweep" --components 8 --clusters 8 --runs 1 --no-ssim \
-  --quiet >"$out/sweep_table.txt"
+  --neural-samples 1048576 --neural-epochs 4 --quiet >"$out/sweep_table.txt"
 
 step "7/7 btf-compress export: the LPCA k = 8, c = 8 codec in the Schneider 2004 3D-texture layout"
 "$bin/btf-compress" export "$out/sweep/codecs/lpca_k8_c8.h5" --format schneider -o "$out/export" --quiet

@@ -12,6 +12,7 @@
 #include "libbtf/core/error.h"
 #include "libbtf/core/error_stats.h"
 #include "libbtf/eval/annotate.h"
+#include "libbtf/eval/codec_at_directions.h"
 
 namespace btf {
 
@@ -172,6 +173,7 @@ nlohmann::json CompareSummary::ToJson() const {
   nlohmann::json j;
   j["reference"] = reference;
   j["test"] = test;
+  j["test_decoded_at_reference_directions"] = test_at_reference_directions;
   j["shape"] = {{"views", views}, {"lights", lights}, {"height", height}, {"width", width}, {"channels", channels}};
   j["values"] = values;
   j["rmse"] = rmse;
@@ -197,6 +199,8 @@ nlohmann::json CompareSummary::ToJson() const {
 
 std::string CompareSummary::Report() const {
   std::string r = fmt::format("reference  {}\ntest       {}\n", reference, test);
+  if (test_at_reference_directions)
+    r += "           (test decoded at the reference's directions: Codec::Value at texel centres)\n";
   r += fmt::format("shape      {} views x {} lights x {}x{} texels x {} channels ({} values)\n", views, lights, width,
                    height, channels, values);
   r += fmt::format("rmse       {:.6g}\n", rmse);
@@ -368,13 +372,18 @@ void WriteErrorMaps(const CompareOptions& options, const SlotSource& ref, const 
 
 }  // namespace
 
-CompareSummary Compare(const CompareOptions& options, const SlotSource& ref, const SlotSource& test,
+CompareSummary Compare(const CompareOptions& options, const SlotSource& ref, const SlotSource& given_test,
                        const Reporter& reporter) {
   options.Check();
+  const std::unique_ptr<SlotSource> resampled = CodecAtReferenceDirections(ref, given_test);
+  const SlotSource& test = resampled ? *resampled : given_test;
   CheckCompatible(ref, test);
   CompareSummary s;
   s.reference = ref.name();
   s.test = test.name();
+  s.test_at_reference_directions = resampled != nullptr;
+  if (resampled)
+    reporter.Info("'{}' is a codec sampled on other directions: decoded at the reference's directions", test.name());
   s.views = ref.views().size();
   s.lights = ref.lights().size();
   s.height = ref.height();

@@ -41,6 +41,9 @@ struct ImageError {
 
 struct CompareSummary {
   std::string reference, test;
+  // The test is a codec whose directions differ from the reference's, decoded at the reference's
+  // directions (CodecAtDirections: Codec::Value at texel centres).
+  bool test_at_reference_directions = false;
   int views = 0, lights = 0, height = 0, width = 0, channels = 0;
   std::uint64_t values = 0;
   double rmse = 0;
@@ -73,7 +76,11 @@ struct CompareSummary {
   std::string Report() const;
 };
 
-// Compares two BTFs with equal shapes and samplings (else btf::Error, bad input).
+// Compares two BTFs with equal shapes and samplings (else btf::Error, bad input). A codec test
+// (CodecSource) whose view or light directions differ from the reference's is decoded at the
+// reference's directions instead (CodecAtReferenceDirections, codec_at_directions.h: its decoder
+// there for the neural codec, the barycentric blend of sampled directions for the others) and the
+// summary says so; datasets with other samplings are refused.
 CompareSummary Compare(const CompareOptions& options, const SlotSource& reference, const SlotSource& test,
                        const Reporter& reporter = {});
 

@@ -29,6 +29,10 @@ void SweepOptions::Check() const {
   for (const auto& m : methods) ParseMethod(m);  // throws (usage) for unknown names
   BTF_CHECK_OPTION(!components.empty(), "components", "give at least one component count");
   for (int c : components) BTF_CHECK_OPTION(c >= 1, "components", "every count must be >= 1");
+  if (std::find(methods.begin(), methods.end(), "neural") != methods.end()) {
+    for (int c : components) BTF_CHECK_OPTION(c <= 256, "components", "neural: the latent width is at most 256");
+    neural.Check();
+  }
   for (int k : clusters) BTF_CHECK_OPTION(k >= 1, "clusters", "every count must be >= 1");
   BTF_CHECK_OPTION(std::none_of(methods.begin(), methods.end(), Clustered) || !clusters.empty(), "clusters",
                    "lpca and lpca-tensor need at least one cluster count");
@@ -133,6 +137,12 @@ Codec CompressAndTime(const SlotSource& truth, const SweepOptions& o, SweepPoint
   if (p.clusters) opt.clusters = p.clusters;
   opt.seed = o.seed;
   opt.log_transform = o.log_transform;
+  if (opt.method == CodecMethod::kNeural) {
+    opt.neural = o.neural;
+    opt.neural.latent = p.components;
+    const std::int64_t triples = std::int64_t(truth.views().size()) * truth.lights().size() * truth.height() * truth.width();
+    opt.neural.samples = std::min(opt.neural.samples, triples);
+  }
   Codec codec;
   CompressSummary cs;
   for (int r = 0; r < o.runs; ++r) {
@@ -423,7 +433,7 @@ std::string ReportIntro(const SweepSummary& s, const SweepOptions& o) {
 
 std::string ReportPlots(const std::vector<std::pair<std::string, Plot>>& plots) {
   std::string h =
-      "<h2>Plots</h2>\n<p>Labels cN next to the markers give the components c. On the size plot, lines join the "
+      "<h2>Plots</h2>\n<p>Labels cN next to the markers give the components c (neural: the latent width). On the size plot, lines join the "
       "settings of one method (and cluster count) in order of c; black rings and the black line mark the Pareto "
       "front (no other setting is both cheaper and more accurate).</p>\n<div class=\"plots\">\n";
   for (const auto& [name, plot] : plots) h += PlotFigureHtml(plot);

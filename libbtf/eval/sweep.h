@@ -24,11 +24,16 @@ namespace btf {
 inline const Vec3 kSweepPointLight{0.5, 5.0, 1.0};
 
 struct SweepOptions {
-  std::vector<std::string> methods{"pca-view", "lpca", "lpca-tensor"};  // codec methods (libbtf/compress)
-  std::vector<int> components{1, 2, 4, 8, 16};            // c per view slot / per cluster
+  std::vector<std::string> methods{"pca-view", "lpca", "lpca-tensor", "neural"};  // codec methods (libbtf/compress)
+  // c per view slot / per cluster; neural: the latent width (NeuralOptions::latent).
+  std::vector<int> components{1, 2, 4, 8, 16};
   std::vector<int> clusters{8, 16, 32};                   // k, lpca only
   int runs = 3;                 // timed runs per setting; the median is reported
   bool log_transform = false;   // compress with the log transform (CompressOptions::log_transform)
+  // The neural codec's options (its latent width comes from `components`). Its training samples
+  // are capped at the BTF's value count / channels (texel, light, view triples), so that a small
+  // dataset trains in proportion to its size.
+  NeuralOptions neural;
   std::uint64_t seed = 1;       // CompressOptions::seed
   // The error on the plots' y axis and for the Pareto fronts: "rel" (relative L2) or "rmse".
   std::string error_metric = "rel";

@@ -103,7 +103,10 @@ TEST(BtfEvalCli, SweepWritesResultsPlotsAndReport) {
                              &out),
             0);
   const auto j = nlohmann::json::parse(out);
-  ASSERT_EQ(j["points"].size(), 2u + 2u * 2u + 2u * 2u);  // pca-view: 2 settings, lpca and lpca-tensor: 2 x 2
+  // pca-view and neural (latent widths 1, 2): 2 settings each, lpca and lpca-tensor: 2 x 2.
+  ASSERT_EQ(j["points"].size(), 2u + 2u * 2u + 2u * 2u + 2u);
+  EXPECT_EQ(j["points"][10]["method"], "neural");
+  EXPECT_EQ(j["points"][11]["stored"]["components"], 2);
   for (const auto& p : j["points"]) {
     EXPECT_GT(p["bytes"].get<double>(), 0);
     EXPECT_GT(p["compress_s"].get<double>(), 0);
@@ -128,7 +131,8 @@ TEST(BtfEvalCli, SweepWritesResultsPlotsAndReport) {
     if (e.path().extension() == ".png") pngs.insert(e.path().filename().string());
   EXPECT_EQ(pngs, (std::set<std::string>{"render_lpca_cylinder_environment.png", "render_lpca_patch_point.png",
                                          "render_lpca-tensor_cylinder_environment.png", "render_lpca-tensor_patch_point.png",
-                                         "render_pca-view_cylinder_environment.png", "render_pca-view_patch_point.png"}));
+                                         "render_pca-view_cylinder_environment.png", "render_pca-view_patch_point.png",
+                                         "render_neural_cylinder_environment.png", "render_neural_patch_point.png"}));
   for (const auto& f : j["files"]) {
     const std::filesystem::path file = f.get<std::string>();
     EXPECT_TRUE(std::filesystem::exists(file)) << file;
@@ -136,7 +140,7 @@ TEST(BtfEvalCli, SweepWritesResultsPlotsAndReport) {
       EXPECT_EQ(file.extension(), ".svg") << file;
     }
   }
-  EXPECT_EQ(j["renders"].size(), 6u);  // 3 methods x (patch + point, cylinder + environment)
+  EXPECT_EQ(j["renders"].size(), 8u);  // 4 methods x (patch + point, cylinder + environment)
   // The report is self-contained: the plots are inline SVG figures with their text in captions,
   // the renders PNG data URIs; nothing refers to other files.
   std::ifstream in(dir / "sweep" / "report.html");

@@ -163,7 +163,7 @@ int main(int argc, char** argv) {
                                             "results.json, plots and report.html in DIR");
   sweep->add_option("DATASET", sf.dataset, "Dataset file (read into memory)")->required();
   sweep->add_option("-o,--output", sf.output, "Output folder (replaced as a whole when complete)")->required();
-  sweep->add_option("--methods", so.methods, "Comma-separated codec methods")->delimiter(',');
+  sweep->add_option("--methods", so.methods, "Comma-separated codec methods (neural: --components is its latent width)")->delimiter(',');
   sweep->add_option("--components", so.components, "Components c to try (comma-separated, e.g. 1,2,4)")->delimiter(',');
   sweep->add_option("--clusters", so.clusters, "Cluster counts k to try (lpca, comma-separated)")->delimiter(',');
   sweep->add_option("--runs", so.runs, "Timed runs per setting (median reported)");
@@ -171,6 +171,9 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"rel", "rmse"}));
   sweep->add_flag("--log", so.log_transform, "Compress with the log transform");
   sweep->add_option("--seed", so.seed, "Compression seed");
+  sweep->add_option("--neural-samples", so.neural.samples,
+                    "neural: training samples (at most the BTF's texel x light x view count; default as btf-compress)");
+  sweep->add_option("--neural-epochs", so.neural.epochs, "neural: passes over the samples (default as btf-compress)");
   sweep->add_flag("--no-ssim", [&](std::int64_t) { so.ssim = false; }, "Skip SSIM");
   sweep->add_flag("--no-render", sf.no_render, "Leave the rendered comparison out of the report");
   sweep->add_flag("--no-codecs", sf.no_codecs, "Do not keep the codec files in DIR/codecs");
