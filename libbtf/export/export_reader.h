@@ -43,6 +43,8 @@ inline std::string FileCrc32(const std::filesystem::path& path) {
     in.read(buf.data(), static_cast<std::streamsize>(buf.size()));
     crc = Crc32(reinterpret_cast<const unsigned char*>(buf.data()), static_cast<std::size_t>(in.gcount()), crc);
   }
+  // A failed read() leaves the stream bad (libstdc++ turns it into badbit), not merely at its end.
+  if (in.bad()) ThrowIo("cannot read '{}' (I/O error): failing disk or network file system?", path.string());
   return fmt::format("{:08x}", crc);
 }
 

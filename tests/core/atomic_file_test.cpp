@@ -91,13 +91,13 @@ TEST(CheckOutput, SameFileByAnyNameAndFoldersHoldingAnInput) {
   }
   EXPECT_NO_THROW(CheckOutput(dir / "new.h5", {dir / "a.h5"}));
   EXPECT_NO_THROW(CheckOutput(dir / "a.h5", {dir / "missing.h5", ""}));
-  EXPECT_NO_THROW(CheckOutput(dir / "sub", {dir / "a.h5"}));  // a folder beside the input
+  EXPECT_NO_THROW(CheckOutput(dir / "sub", {dir / "a.h5"}, OutputKind::kFolder));  // a folder beside the input
   std::ofstream(dir / "sub" / "c.h5") << "input";
   ExitCode code{};
-  const std::string msg = test::ErrorOf([&] { CheckOutput(dir / "sub", {dir / "sub" / "c.h5"}); }, &code);
+  const std::string msg = test::ErrorOf([&] { CheckOutput(dir / "sub", {dir / "sub" / "c.h5"}, OutputKind::kFolder); }, &code);
   EXPECT_EQ(code, ExitCode::kUsage);
   EXPECT_NE(msg.find("holds the input"), std::string::npos) << msg;
-  EXPECT_NO_THROW(CheckOutput(dir / "su", {dir / "sub" / "c.h5"}));  // a name prefix is no folder
+  EXPECT_NO_THROW(CheckOutput(dir / "su", {dir / "sub" / "c.h5"}, OutputKind::kFolder));  // a name prefix is no folder
 }
 
 // Only a regular file, a symbolic link or nothing may be replaced: a named pipe, a device or a

@@ -149,7 +149,9 @@ TEST(SchneiderExport, FilesHaveTheManifestShapes) {
 // intact export reads.
 TEST(SchneiderExport, AFlippedBitInAnyFileIsRefused) {
   const auto dir = test::TempDir() / "export";
-  ExportSchneider({}, SmallLpca(), dir);
+  SchneiderExportOptions o;
+  o.view_grid = o.light_grid = 2;  // a small atlas (about 1 kB): every byte of every file is flipped
+  ExportSchneider(o, SmallLpca(), dir);
   const nlohmann::json j = nlohmann::json::parse(std::ifstream(dir / "manifest.json"));
   ASSERT_EQ(j["checksums"]["algorithm"], "crc32");
   std::set<std::string> listed;

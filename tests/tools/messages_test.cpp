@@ -20,6 +20,7 @@ TEST(Messages, MistypedOptionsAndCommandsGetTheNearestName) {
   const std::string metod = Output(test::Tool("btf-compress") + " in.h5 --metod lpca -o out.h5", 2);
   EXPECT_NE(metod.find("btf-compress: error: unknown option '--metod' (did you mean '--method'?)"), std::string::npos)
       << metod;
+  EXPECT_EQ(metod.find("'lpca'"), std::string::npos) << "the unknown option's value is not a second error: " << metod;
   EXPECT_NE(metod.find("see btf-compress --help"), std::string::npos) << metod;
   const std::string comapre = Output(test::Tool("btf-eval") + " comapre a.h5 b.h5", 2);
   EXPECT_NE(comapre.find("did you mean 'compare'?"), std::string::npos) << comapre;

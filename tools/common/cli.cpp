@@ -289,15 +289,18 @@ std::string Nearest(const std::string& word, const std::vector<std::string>& nam
 
 // CLI11's parse errors in docs/errors.md's style: what is wrong, the nearest valid name, where to
 // look.
-std::string ParseErrorMessage(const CLI::App& app, const CLI::ParseError& e) {
+std::string ParseErrorMessage(const CLI::App& app, const CLI::ParseError& e, int argc, char** argv) {
   std::vector<std::string> options, commands;
   CollectNames(app, options, commands);
   std::string what = e.what();
   if (dynamic_cast<const CLI::ExtrasError*>(&e)) {
     const std::size_t colon = what.find(": ");
-    std::string message;
+    std::vector<std::string> unknown, positional;
     std::istringstream words(colon == std::string::npos ? what : what.substr(colon + 2));
-    for (std::string w; words >> w;) {
+    for (std::string w; words >> w;) (w.rfind('-', 0) == 0 ? unknown : positional).push_back(w);
+    // With an unknown option, the extra words are most likely its values: the option is the error.
+    std::string message;
+    for (const std::string& w : unknown.empty() ? positional : unknown) {
       const bool option = w.rfind('-', 0) == 0;
       const std::string name = option ? w.substr(0, w.find('=')) : w;
       std::string hint = Nearest(name, option ? options : commands);
@@ -306,7 +309,13 @@ std::string ParseErrorMessage(const CLI::App& app, const CLI::ParseError& e) {
     }
     what = message;
   } else if (what == "A subcommand is required" && !commands.empty()) {
-    what = fmt::format("a command is required: one of {}", fmt::join(commands, ", "));
+    // The first word that is not an option is what was meant as the command.
+    std::string given;
+    for (int i = 1; i < argc && given.empty(); ++i)
+      if (argv[i][0] != '-') given = argv[i];
+    const std::string hint = given.empty() ? "" : Nearest(given, commands);
+    what = !given.empty() ? fmt::format("unknown command '{}'{}; one of {}", given, hint, fmt::join(commands, ", "))
+                          : fmt::format("a command is required: one of {}", fmt::join(commands, ", "));
   }
   return fmt::format("{}; see {} --help", what, app.get_name());
 }
@@ -323,7 +332,7 @@ int RunTool(int argc, char** argv, CLI::App& app, const std::function<int()>& ru
     } catch (const CLI::ParseError& e) {
       // Every rank parses the same command line: rank 0 alone prints help or the error.
       if (e.get_exit_code() == 0) return PrintingRank() ? app.exit(e) : 0;  // --help, --version
-      if (PrintingRank()) PrintError(app, "error", ParseErrorMessage(app, e));
+      if (PrintingRank()) PrintError(app, "error", ParseErrorMessage(app, e, argc, argv));
       return static_cast<int>(ExitCode::kUsage);
     }
     CheckDistributable(app);
