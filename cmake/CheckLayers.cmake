@@ -41,7 +41,7 @@ endforeach()
 # Inside compress/: files in layers, each including only its own layer and those below
 # (docs/architecture.md, "Inside compress/"). Every file must match one layer.
 set(compress_layers
-  "codec:^(codec|codec_io|codec_writer|codec_source|value_transform|fmf_codec|lpca_tensor|lpca_reassign|pca|gram_kernel|scene|bonn_fmf|bonn_pvf|neural_net|neural_codec)\\."
+  "codec:^(codec|codec_io|codec_items|codec_writer|codec_source|value_transform|fmf_codec|lpca_tensor|lpca_reassign|pca|gram_kernel|scene|bonn_fmf|bonn_pvf|neural_net|neural_codec)\\."
   "shared:^(compress_options|compress_summary|method)\\."
   "methods:^(pca_view|lpca|lpca_internal|lpca_rows|lpca_sample|lpca_fit|lpca_tensor_method|fmf_method|neural_[a-z_]+)\\."
   "controller:^compress\\.")

@@ -11,6 +11,7 @@
 #include <omp.h>
 
 #include "libbtf/compress/codec.h"
+#include "libbtf/compress/codec_items.h"
 #include "libbtf/core/error.h"
 #include "libbtf/io/hdf5.h"
 
@@ -277,34 +278,8 @@ constexpr const char* kGroup = "/codec/lpca_tensor";
 
 std::string Item(const char* name) { return fmt::format("{}/{}", kGroup, name); }
 
-void CheckDims(const h5::File& f, const std::string& name, const std::vector<hsize_t>& dims) {
-  const auto got = f.Dims(name);
-  if (got != dims) {
-    std::string want, have;
-    for (auto x : dims) want += fmt::format("{}x", x);
-    for (auto x : got) have += fmt::format("{}x", x);
-    ThrowBadInput("'{}': '{}' has shape {}, expected {}", f.path(), name,
-                  have.empty() ? "scalar" : have.substr(0, have.size() - 1), want.substr(0, want.size() - 1));
-  }
-}
-
-std::vector<std::int32_t> Ints(const h5::File& f, const std::string& name, const std::vector<hsize_t>& dims,
-                               std::int64_t lo, std::int64_t hi) {
-  CheckDims(f, name, dims);
-  auto v = f.ReadInts(name);
-  for (std::size_t i = 0; i < v.size(); ++i)
-    if (v[i] < lo || v[i] > hi)
-      ThrowBadInput("'{}': '{}' element {} is {}, outside [{}, {}]", f.path(), name, i, v[i], lo, hi);
-  return v;
-}
-
-std::vector<float> Floats(const h5::File& f, const std::string& name, const std::vector<hsize_t>& dims) {
-  CheckDims(f, name, dims);
-  auto v = f.ReadFloats(name);
-  for (std::size_t i = 0; i < v.size(); ++i)
-    if (!std::isfinite(v[i])) ThrowBadInput("'{}': '{}' holds a non-finite value at element {}", f.path(), name, i);
-  return v;
-}
+using codec_items::Floats;
+using codec_items::Ints;
 
 std::vector<std::uint16_t> Codes(const h5::File& f, const std::string& name, const std::vector<hsize_t>& dims, int bits) {
   const auto v = Ints(f, name, dims, 0, (1 << bits) - 1);

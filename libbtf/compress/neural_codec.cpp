@@ -2,6 +2,7 @@
 
 #include <cmath>
 
+#include "libbtf/compress/codec_items.h"
 #include "libbtf/compress/lpca_tensor.h"
 #include "libbtf/core/dataset.h"
 #include "libbtf/core/error.h"
@@ -70,25 +71,9 @@ std::string Item(const std::string& name) { return fmt::format("{}/{}", kGroup, 
 std::string WeightName(int l) { return fmt::format("weight_{}", l); }
 std::string BiasName(int l) { return fmt::format("bias_{}", l); }
 
-std::string Shape(const std::vector<hsize_t>& dims) {
-  std::string s;
-  for (auto x : dims) s += fmt::format("{}{}", s.empty() ? "" : "x", x);
-  return s.empty() ? "scalar" : s;
-}
-
-void CheckDims(const h5::File& f, const std::string& name, const std::vector<hsize_t>& dims) {
-  if (!f.Exists(name)) ThrowBadInput("'{}': required item '{}' is missing", f.path(), name);
-  const auto got = f.Dims(name);
-  if (got != dims) ThrowBadInput("'{}': '{}' has shape {}, expected {}", f.path(), name, Shape(got), Shape(dims));
-}
-
-std::vector<float> Floats(const h5::File& f, const std::string& name, const std::vector<hsize_t>& dims) {
-  CheckDims(f, name, dims);
-  auto v = f.ReadFloats(name);
-  for (std::size_t i = 0; i < v.size(); ++i)
-    if (!std::isfinite(v[i])) ThrowBadInput("'{}': '{}' holds a non-finite value at element {}", f.path(), name, i);
-  return v;
-}
+using codec_items::CheckDims;
+using codec_items::Floats;
+using codec_items::Shape;
 
 std::int64_t Attr(const h5::File& f, const char* name, std::int64_t lo, std::int64_t hi) {
   const std::int64_t v = f.GetInt(kGroup, name);
