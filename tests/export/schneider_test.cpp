@@ -17,28 +17,20 @@
 namespace btf {
 namespace {
 
-Codec SmallLpca() {
+// lpca, or lpca-tensor with 8-bit factors.
+Codec SmallLpca(CodecMethod method = CodecMethod::kLpca) {
   const Dataset d = test::ClusteredLowRank(test::BonnSubset(19), test::BonnSubset(19), 6, 5, 3, 2);
   CompressOptions o;
-  o.method = CodecMethod::kLpca;
-  o.clusters = 3;
-  o.components = 2;
-  return test::CompressDataset(d, o);
-}
-
-// At grid nodes the trilinear fetch is exact, so the only difference to the codec's own
-// barycentric decoder is the storage rounding: |diff| <= sum_f |terms[1 + f]| * per_t (u8: 1/510,
-// f16: 2^-12), plus 1e-5 for float arithmetic in the decoders (values are O(1)).
-Codec SmallLpcaTensor() {
-  const Dataset d = test::ClusteredLowRank(test::BonnSubset(19), test::BonnSubset(19), 6, 5, 3, 2);
-  CompressOptions o;
-  o.method = CodecMethod::kLpcaTensor;
+  o.method = method;
   o.clusters = 3;
   o.components = 2;
   o.tensor.quant_bits = 8;
   return test::CompressDataset(d, o);
 }
 
+// At grid nodes the trilinear fetch is exact, so the only difference to the codec's own
+// barycentric decoder is the storage rounding: |diff| <= sum_f |terms[1 + f]| * per_t (u8: 1/510,
+// f16: 2^-12), plus 1e-5 for float arithmetic in the decoders (values are O(1)).
 void ExpectGridNodesWithinBound(const std::string& storage, int atlas_side, double min_used_fraction,
                                 const Codec& codec = SmallLpca()) {
   const auto dir = test::TempDir() / ("export_" + storage);
@@ -88,7 +80,7 @@ TEST(SchneiderExport, ReferenceDecoderMatchesCodecToTheQuantizationErrorF16) { E
 // against its own decoder, and the expansion decodes as the tensor codec does (float rounding of
 // the summed terms: 1e-5 of values O(1)).
 TEST(SchneiderExport, LpcaTensorExportsAsTheLpcaItFactorises) {
-  const Codec tensor = SmallLpcaTensor();
+  const Codec tensor = SmallLpca(CodecMethod::kLpcaTensor);
   ExpectGridNodesWithinBound("f16", 256, 0.01, tensor);
   const Dataset a = tensor.DecodeAll(), b = ExpandToLpcaCodec(tensor).DecodeAll();
   ASSERT_EQ(a.size(), b.size());
