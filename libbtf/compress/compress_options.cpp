@@ -49,6 +49,7 @@ void NeuralOptions::Check() const {
   BTF_CHECK_OPTION(epochs > 0 && epochs <= 1e6, "neural_epochs", "must be in (0, 1e6]");
   BTF_CHECK_OPTION(batch >= 1 && batch <= (1 << 20), "neural_batch", "must be 1..2^20");
   BTF_CHECK_OPTION(learning_rate > 0 && learning_rate <= 1, "neural_learning_rate", "must be in (0, 1]");
+  BTF_CHECK_OPTION(linear_loss >= 0 && linear_loss <= 1, "neural_linear_loss", "must be in [0, 1]");
 }
 
 void CompressOptions::Check() const {
@@ -99,6 +100,7 @@ nlohmann::json CompressOptions::ToJson() const {
   j["neural_epochs"] = neural.epochs;
   j["neural_batch"] = neural.batch;
   j["neural_learning_rate"] = neural.learning_rate;
+  j["neural_linear_loss"] = neural.linear_loss;
   return j;
 }
 

@@ -81,6 +81,7 @@ struct NeuralOptions {
   double epochs = 4;
   int batch = 4096;                 // samples per step
   double learning_rate = 1e-2;      // decoder and latents, at step 0 (cosine decay to 5 %)
+  double linear_loss = 0;           // weight of the linear-domain term in the loss (NeuralTrainOptions)
   void Check() const;
 };
 

@@ -56,9 +56,34 @@ std::uint64_t NeuralCodecModel::StoredBytes() const {
 
 void NeuralCodecModel::DecodeImages(Eigen::Index n, const float* wi, const float* wo, float* out) const {
   const Eigen::Index T = texels();
-  Evaluate(
-      n * T, [&](Eigen::Index i) { return latents.col(i % T).data(); }, [&](Eigen::Index i) { return wi + 3 * (i / T); },
-      [&](Eigen::Index i) { return wo + 3 * (i / T); }, out);
+  const int E = encoding.Width(), C = channels();
+  const auto W0 = net.weight(0);
+  const Eigen::Index H = W0.rows(), per_pair = (T + kNeuralChunk - 1) / kNeuralChunk;
+  // Layer 0 is W_0 [z; e] + b_0 = W_z z + (W_e e + b_0): the latent part once per texel (P), the
+  // direction part once per pair. Both loops hand out the same chunks for any thread count, and
+  // Eigen runs each product on its thread alone inside the parallel region.
+  Eigen::MatrixXf P(H, T);
+#pragma omp parallel
+  {
+#pragma omp for schedule(static)
+    for (Eigen::Index c = 0; c < per_pair; ++c) {
+      const Eigen::Index begin = c * kNeuralChunk, count = std::min(kNeuralChunk, T - begin);
+      P.middleCols(begin, count).noalias() = W0.leftCols(latent) * latents.middleCols(begin, count);
+    }
+    NeuralNet::Workspace ws;
+    Eigen::MatrixXf z0;
+    Eigen::VectorXf e(E), d(H);
+#pragma omp for schedule(static)
+    for (Eigen::Index k = 0; k < n * per_pair; ++k) {
+      const Eigen::Index pair = k / per_pair, begin = (k % per_pair) * kNeuralChunk,
+                         count = std::min(kNeuralChunk, T - begin);
+      EncodeDirections(encoding, wi + 3 * pair, wo + 3 * pair, e.data());
+      d.noalias() = W0.rightCols(E) * e;
+      d += net.bias(0);
+      z0 = P.middleCols(begin, count).colwise() + d;
+      Eigen::Map<Eigen::MatrixXf>(out + (pair * T + begin) * C, C, count) = net.ForwardFromFirstLayer(std::move(z0), ws);
+    }
+  }
 }
 
 // ---- Codec-file items ----

@@ -53,7 +53,8 @@ struct NeuralCodecModel {
   template <typename Latent, typename Wi, typename Wo>
   void Evaluate(Eigen::Index n, const Latent& z, const Wi& wi, const Wo& wo, float* out) const;
 
-  // Every texel at n direction pairs (3 n floats each): out n x T x C, transformed domain.
+  // Every texel at n direction pairs (3 n floats each): out n x T x C, transformed domain. The first
+  // layer's latent part is computed once per texel, not per pair (Evaluate's values to rounding).
   void DecodeImages(Eigen::Index n, const float* wi, const float* wo, float* out) const;
 };
 

@@ -112,6 +112,7 @@ NeuralTrainOptions TrainOptions(const CompressOptions& o) {
   t.steps = o.neural.steps;
   t.epochs = o.neural.epochs;
   t.learning_rate = t.latent_learning_rate = o.neural.learning_rate;
+  t.linear_loss = o.neural.linear_loss;
   t.seed = o.seed;
   return t;
 }

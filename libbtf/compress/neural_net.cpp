@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numbers>
 
 #include "libbtf/core/error.h"
@@ -180,17 +181,27 @@ template <typename Scalar>
 const typename BasicNeuralNet<Scalar>::Matrix& BasicNeuralNet<Scalar>::Forward(const Eigen::Ref<const Matrix>& X,
                                                                                Workspace& ws) const {
   BTF_CHECK(X.rows() == shape_.inputs);
+  Matrix z0;
+  z0.noalias() = weight(0) * X;
+  z0.colwise() += bias(0);
+  return ForwardFromFirstLayer(std::move(z0), ws);
+}
+
+template <typename Scalar>
+const typename BasicNeuralNet<Scalar>::Matrix& BasicNeuralNet<Scalar>::ForwardFromFirstLayer(Matrix&& z0,
+                                                                                             Workspace& ws) const {
+  BTF_CHECK(z0.rows() == weight(0).rows());
   const int L = layers();
   ws.z.resize(L);
   ws.a.resize(L);
   ws.sig.resize(L);
+  ws.z[0].swap(z0);
   for (int l = 0; l < L; ++l) {
     Matrix& z = ws.z[l];
-    if (l == 0)
-      z.noalias() = weight(0) * X;
-    else
+    if (l > 0) {
       z.noalias() = weight(l) * ws.a[l - 1];
-    z.colwise() += bias(l);
+      z.colwise() += bias(l);
+    }
     if (l + 1 < L) {
       ws.a[l].resize(z.rows(), z.cols());
       Scalar* sig = nullptr;
@@ -345,6 +356,8 @@ void NeuralTrainOptions::Check() const {
                    fmt::format("must be in (0, 1] (given {})", final_learning_rate));
   BTF_CHECK_OPTION(latent_init >= 0 && latent_init <= 10, "latent_init",
                    fmt::format("must be in [0, 10] (given {})", latent_init));
+  BTF_CHECK_OPTION(linear_loss >= 0 && linear_loss <= 1, "linear_loss",
+                   fmt::format("must be in [0, 1] (given {})", linear_loss));
 }
 
 void BlockGradient::Clear() {
@@ -410,6 +423,13 @@ NeuralTrainer::NeuralTrainer(const NeuralSamples& samples, const NeuralTrainOpti
   adam_ = Adam(model_.net.parameter_count(), o_.adam);
   latent_adam_ = LazyAdam(samples_.texels, o_.latent, o_.adam);
   slot_scratch_.assign(std::size_t(samples_.texels), -1);
+  double square_sum = 0;
+  max_target_ = -std::numeric_limits<float>::infinity();
+  for (const float t : samples_.target) {
+    square_sum += std::exp(2.0 * t);
+    max_target_ = std::max(max_target_, t);
+  }
+  linear_scale_ = square_sum > 0 && std::isfinite(square_sum) ? double(samples_.target.size()) / square_sum : 0;
 }
 
 int NeuralTrainer::blocks_per_step() const { return (o_.batch + o_.block - 1) / o_.block; }
@@ -482,12 +502,19 @@ void NeuralTrainer::ComputeBlockGradients(int first, int count, std::vector<Bloc
       const Eigen::MatrixXf& Y = net.Forward(X, ws);
       dY.resize(C, nb);
       double sse = 0;
+      const float w_log = float(1 - o_.linear_loss), w_lin = float(o_.linear_loss * linear_scale_);
       for (int j = 0; j < nb; ++j) {
         const float* t = &samples_.target[std::size_t(batch_[begin + j]) * C];
         for (int c = 0; c < C; ++c) {
           const float r = Y(c, j) - t[c];
-          sse += double(r) * r;
-          dY(c, j) = 2 * r;  // d(r^2)/dy
+          float loss = w_log * r * r, d = 2 * w_log * r;  // d(r^2)/dy
+          if (w_lin > 0) {
+            const float ey = std::exp(std::min(Y(c, j), max_target_ + 1)), rl = ey - std::exp(t[c]);
+            loss += w_lin * rl * rl;
+            d += 2 * w_lin * rl * ey;  // d((e^y - e^t)^2)/dy
+          }
+          sse += loss;
+          dY(c, j) = d;
         }
       }
       g.squared_error = sse;

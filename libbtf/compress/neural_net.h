@@ -89,6 +89,10 @@ class BasicNeuralNet {
 
   // X: inputs x batch. Returns the outputs x batch result (held in ws).
   const Matrix& Forward(const Eigen::Ref<const Matrix>& X, Workspace& ws) const;
+  // The same from layer 0's pre-activation z0 = W_0 X + b_0 (first layer's outputs x batch; taken
+  // over by ws), for a caller that computes the first layer in parts: decoding many direction
+  // pairs for the same latents computes W_0's latent columns once per texel.
+  const Matrix& ForwardFromFirstLayer(Matrix&& z0, Workspace& ws) const;
   // After Forward(X, ws): dY (outputs x batch) is d(loss)/d(output). Adds d(loss)/d(parameters)
   // to grad (parameter_count() values); writes d(loss)/dX (inputs x batch) to dX unless null.
   void Backward(const Eigen::Ref<const Matrix>& X, const Eigen::Ref<const Matrix>& dY, Workspace& ws, Scalar* grad,
@@ -182,19 +186,24 @@ struct NeuralTrainOptions {
   // Cosine decay from the rates above to this fraction of them at the last step.
   double final_learning_rate = 0.05;
   double latent_init = 0.1;          // latents start uniform in [-latent_init, latent_init]
+  // The loss per value: (1 - w) r^2 + w (e^y - e^t)^2 / mean(e^2t), with r = y - t the residual in
+  // the log domain (y the decoder's value, t the target) and w = linear_loss. The second term is
+  // the squared error in the linear domain (e^y = x + eps) relative to the samples' mean square,
+  // which is what relative L2 errors measure; the first keeps dark values in shape.
+  double linear_loss = 0;
   AdamOptions adam;
   std::uint64_t seed = 1;
   void Check() const;  // throws btf::Error (usage) naming the field
 };
 
-// One block's contribution to a step: the gradient of the block's sum of squared errors (not yet
+// One block's contribution to a step: the gradient of the block's sum of losses (not yet
 // divided by the batch's value count) with respect to the decoder parameters and to each sample's
 // latent.
 struct BlockGradient {
   std::vector<float> parameters;     // parameter_count()
   std::vector<std::int32_t> texels;  // per sample of the block
   std::vector<float> latents;        // latent values per sample, in sample order
-  double squared_error = 0;          // sum over the block's samples and channels
+  double squared_error = 0;          // sum of the losses over the block's samples and channels
   std::int64_t values = 0;           // samples x channels
   void Clear();
 };
@@ -204,7 +213,7 @@ struct StepGradient {
   std::vector<float> parameters;
   std::vector<std::int32_t> texels;  // distinct texels, in the order of first appearance
   std::vector<float> latents;        // latent values per entry of texels
-  double loss = 0;                   // mean squared error over the batch's samples and channels
+  double loss = 0;                   // mean loss over the batch's samples and channels
   std::int64_t values = 0;           // samples x channels
 };
 // blocks: all of a step's blocks, in block order; latent: values per texel; scratch: texels
@@ -245,6 +254,8 @@ class NeuralTrainer {
   LazyAdam latent_adam_;
   std::int64_t steps_ = 0, step_ = 0;
   std::vector<std::int32_t> slot_scratch_;
+  double linear_scale_ = 0;  // 1 / mean(e^2t) over all target values
+  float max_target_ = 0;     // the largest target: e^y is taken at min(y, max_target_ + 1)
   mutable std::int64_t perm_epoch_ = -1;
   mutable std::vector<std::int64_t> perm_;
   mutable std::vector<std::int64_t> batch_;

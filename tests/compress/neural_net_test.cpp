@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <omp.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -180,55 +181,86 @@ NeuralTrainOptions SmallOptions() {
   return o;
 }
 
-TEST(NeuralTrainer, StepGradientIsTheMeanSquaredErrorsGradient) {
-  // The trainer's reduced step gradient (float blocks summed in double, divided by the value
-  // count) against the double network's gradient of the same batch's mean squared error, built
-  // here from the trainer's own latents, encodings and batch.
-  const NeuralSamples s = test::LobeSamples(16, 100, 1);
-  NeuralTrainOptions o = SmallOptions();
-  o.encoding.half_vector = true;
-  o.activation = Activation::kSilu;
-  NeuralTrainer trainer(s, o);
-  std::vector<BlockGradient> blocks;
-  trainer.ComputeBlockGradients(0, trainer.blocks_per_step(), &blocks);
-  std::vector<std::int32_t> scratch(s.texels, -1);
-  const StepGradient g = ReduceInOrder(blocks, o.latent, scratch);
-  for (const std::int32_t v : scratch) ASSERT_EQ(v, -1);
+// The training loss of NeuralTrainOptions::linear_loss in double: per value
+// (1 - w) (y - t)^2 + w (e^y - e^t)^2 / S, S the mean of e^2t over all samples; its mean over the
+// values, and d(mean)/dY in dY.
+double TrainingLoss(const Eigen::MatrixXd& Y, const Eigen::MatrixXd& T, double w, double S, Eigen::MatrixXd* dY) {
+  const Eigen::ArrayXXd r = (Y - T).array(), ey = Y.array().exp(), rl = ey - T.array().exp();
+  const double values = double(Y.size());
+  if (dY) *dY = ((2 * (1 - w)) * r + (2 * w / S) * rl * ey).matrix() / values;
+  return ((1 - w) * r.square() + (w / S) * rl.square()).sum() / values;
+}
 
-  const NeuralModel& m = trainer.model();
-  NetD d(m.net.shape(), 0);
-  for (Eigen::Index k = 0; k < d.parameter_count(); ++k) d.parameters()[k] = m.net.parameters()[k];
-  std::vector<std::int64_t> batch;
-  trainer.StepSamples(0, &batch);
-  const int E = o.encoding.Width(), n = int(batch.size());
-  Eigen::MatrixXd X(o.latent + E, n), T(3, n);
-  for (int j = 0; j < n; ++j) {
-    const std::int64_t i = batch[j];
-    X.col(j).head(o.latent) = m.latents.col(s.texel[i]).cast<double>();
-    float enc[64];
-    EncodeDirections(o.encoding, &s.wi[3 * i], &s.wo[3 * i], enc);
-    for (int e = 0; e < E; ++e) X(o.latent + e, j) = enc[e];
-    for (int c = 0; c < 3; ++c) T(c, j) = s.target[3 * i + c];
+TEST(NeuralTrainer, StepGradientIsTheLossGradientInDoubleAndByCentralDifferences) {
+  // The trainer's reduced step gradient (float blocks summed in double, divided by the value
+  // count) against the double network's gradient of the same batch's loss, built here from the
+  // trainer's own latents, encodings and batch, for the log-domain loss (w = 0), the linear one
+  // (w = 1) and a mix; and that double gradient against central differences of the loss.
+  const NeuralSamples s = test::LobeSamples(16, 100, 1);
+  double S = 0;
+  for (const float t : s.target) S += std::exp(2.0 * double(t));
+  S /= double(s.target.size());
+  for (const double w : {0.0, 0.5, 1.0}) {
+    SCOPED_TRACE(fmt::format("linear_loss {}", w));
+    NeuralTrainOptions o = SmallOptions();
+    o.encoding.half_vector = true;
+    o.activation = Activation::kSilu;
+    o.linear_loss = w;
+    NeuralTrainer trainer(s, o);
+    std::vector<BlockGradient> blocks;
+    trainer.ComputeBlockGradients(0, trainer.blocks_per_step(), &blocks);
+    std::vector<std::int32_t> scratch(s.texels, -1);
+    const StepGradient g = ReduceInOrder(blocks, o.latent, scratch);
+    for (const std::int32_t v : scratch) ASSERT_EQ(v, -1);
+
+    const NeuralModel& m = trainer.model();
+    NetD d(m.net.shape(), 0);
+    for (Eigen::Index k = 0; k < d.parameter_count(); ++k) d.parameters()[k] = m.net.parameters()[k];
+    std::vector<std::int64_t> batch;
+    trainer.StepSamples(0, &batch);
+    const int E = o.encoding.Width(), n = int(batch.size());
+    Eigen::MatrixXd X(o.latent + E, n), T(3, n);
+    for (int j = 0; j < n; ++j) {
+      const std::int64_t i = batch[j];
+      X.col(j).head(o.latent) = m.latents.col(s.texel[i]).cast<double>();
+      float enc[64];
+      EncodeDirections(o.encoding, &s.wi[3 * i], &s.wo[3 * i], enc);
+      for (int e = 0; e < E; ++e) X(o.latent + e, j) = enc[e];
+      for (int c = 0; c < 3; ++c) T(c, j) = s.target[3 * i + c];
+    }
+    NetD::Workspace ws;
+    const Eigen::MatrixXd Y = d.Forward(X, ws);
+    // The trainer evaluates e^y at min(y, max target + 1): the test's outputs stay below that.
+    ASSERT_LT(Y.maxCoeff(), *std::max_element(s.target.begin(), s.target.end()) + 1);
+    Eigen::MatrixXd dY;
+    const double loss = TrainingLoss(Y, T, w, S, &dY);
+    EXPECT_NEAR(g.loss, loss, 1e-5 * loss);
+    EXPECT_EQ(g.values, 3 * n);
+    std::vector<double> gd(d.parameter_count(), 0.0);
+    Eigen::MatrixXd dX;
+    d.Backward(X, dY, ws, gd.data(), &dX);
+    double scale = 0;
+    for (const double v : gd) scale = std::max(scale, std::abs(v));
+    for (Eigen::Index k = 0; k < d.parameter_count(); ++k) ASSERT_NEAR(g.parameters[k], gd[k], 1e-4 * scale) << k;
+    // Central differences of the double loss, every 5th parameter: O(h^2) = 1e-10 truncation.
+    for (Eigen::Index k = 0; k < d.parameter_count(); k += 5) {
+      const double p0 = d.parameters()[k], h = 1e-5;
+      d.parameters()[k] = p0 + h;
+      const double up = TrainingLoss(d.Forward(X, ws), T, w, S, nullptr);
+      d.parameters()[k] = p0 - h;
+      const double down = TrainingLoss(d.Forward(X, ws), T, w, S, nullptr);
+      d.parameters()[k] = p0;
+      ASSERT_NEAR((up - down) / (2 * h), gd[k], 1e-6 * scale + 1e-9) << k;
+    }
+    // Latents: each texel's gradient is the sum over its samples in the batch.
+    Eigen::MatrixXd lat = Eigen::MatrixXd::Zero(o.latent, s.texels);
+    for (int j = 0; j < n; ++j) lat.col(s.texel[batch[j]]) += dX.col(j).head(o.latent);
+    ASSERT_EQ(g.texels.size(), 16u);  // 1024 samples of 16 texels: all appear
+    const double lat_scale = lat.cwiseAbs().maxCoeff();
+    for (std::size_t i = 0; i < g.texels.size(); ++i)
+      for (int l = 0; l < o.latent; ++l)
+        EXPECT_NEAR(g.latents[i * o.latent + l], lat(l, g.texels[i]), 1e-4 * lat_scale) << g.texels[i] << " " << l;
   }
-  NetD::Workspace ws;
-  const Eigen::MatrixXd R = d.Forward(X, ws) - T;
-  const double values = 3.0 * n;
-  EXPECT_NEAR(g.loss, R.squaredNorm() / values, 1e-5 * g.loss);
-  EXPECT_EQ(g.values, 3 * n);
-  std::vector<double> gd(d.parameter_count(), 0.0);
-  Eigen::MatrixXd dX;
-  d.Backward(X, 2 * R / values, ws, gd.data(), &dX);
-  double scale = 0;
-  for (const double v : gd) scale = std::max(scale, std::abs(v));
-  for (Eigen::Index k = 0; k < d.parameter_count(); ++k) ASSERT_NEAR(g.parameters[k], gd[k], 1e-4 * scale) << k;
-  // Latents: each texel's gradient is the sum over its samples in the batch.
-  Eigen::MatrixXd lat = Eigen::MatrixXd::Zero(o.latent, s.texels);
-  for (int j = 0; j < n; ++j) lat.col(s.texel[batch[j]]) += dX.col(j).head(o.latent);
-  ASSERT_EQ(g.texels.size(), 16u);  // 1024 samples of 16 texels: all appear
-  const double lat_scale = lat.cwiseAbs().maxCoeff();
-  for (std::size_t i = 0; i < g.texels.size(); ++i)
-    for (int l = 0; l < o.latent; ++l)
-      EXPECT_NEAR(g.latents[i * o.latent + l], lat(l, g.texels[i]), 1e-4 * lat_scale) << g.texels[i] << " " << l;
 }
 
 TEST(NeuralTrainer, FitsSyntheticLobesOnHeldOutDirections) {
@@ -359,12 +391,15 @@ TEST(NeuralTrainer, RefusesNonFiniteTargetsBadSamplesAndBadOptions) {
   bad = o;
   bad.encoding.fourier = 9;
   EXPECT_EQ(CodeOf([&] { train(good, bad); }), ExitCode::kUsage);
+  bad = o;
+  bad.linear_loss = 1.5;
+  EXPECT_EQ(CodeOf([&] { train(good, bad); }), ExitCode::kUsage);
   EXPECT_EQ(CodeOf([&] { train(good, o); }), ExitCode::kOk);
 }
 
 TEST(NeuralTrainer, GrazingDirectionsGiveFiniteResults) {
   // Directions in the tangent plane (z = 0) and opposite pairs (wi = -wo: no half vector),
-  // targets of log(1e-3) and log(1e4), every encoding feature and every activation.
+  // targets of log(1e-3) and log(1e4), every encoding feature and activation, log and linear loss.
   NeuralSamples s;
   s.texels = 4;
   for (int i = 0; i < 256; ++i) {
@@ -377,11 +412,14 @@ TEST(NeuralTrainer, GrazingDirectionsGiveFiniteResults) {
     for (int c = 0; c < 3; ++c) s.target.push_back(float(i % 3 ? std::log(1e-3) : std::log(1e4)));
   }
   const OneThread one;
+  for (const double w : {0.0, 1.0})
   for (const Activation act : kActivations) {
+    SCOPED_TRACE(fmt::format("linear_loss {}", w));
     NeuralTrainOptions o = SmallOptions();
     o.batch = 128;
     o.block = 64;
     o.steps = 50;
+    o.linear_loss = w;
     o.activation = act;
     o.encoding.half_vector = true;
     o.encoding.fourier = 3;

@@ -141,6 +141,8 @@ int main(int argc, char** argv) {
   app.add_option("--neural-epochs", no.epochs, "neural: passes over the samples when --neural-steps is 0");
   app.add_option("--neural-batch", no.batch, "neural: samples per training step");
   app.add_option("--neural-lr", no.learning_rate, "neural: learning rate at step 0 (cosine decay to 5 %)");
+  app.add_option("--neural-linear-loss", no.linear_loss,
+                 "neural: weight (0..1) of the linear-domain squared error in the loss, beside the log domain's");
   app.add_option("--seed", co.seed, "Seed of k-means++, the randomised SVD and the neural codec's samples and training");
   app.add_flag("--log", co.log_transform, "Compress log(x + epsilon) (HDR data); recorded in the codec");
   app.add_option("--log-epsilon", co.log_epsilon, "Epsilon of --log, in data units");
