@@ -106,7 +106,7 @@ double Luminance(const Image& im, int x, int y) {
 
 struct Agreement {
   double level = 0, mean_abs = 0, max_abs_inside = 0;
-  int inside = 0, silhouette = 0, texel_edge = 0;
+  int inside = 0, silhouette = 0, texel_edge = 0, filtered = 0;
   double worst_edge_distance = 0;  // texel-edge distance of the worst pixel inside (diagnostics)
 };
 
@@ -127,6 +127,12 @@ double TexelEdgeDistance(const Vec2& uv, int width, int height) {
 // nearest-texel lookup flips between float32 (browser) and double (CPU) arithmetic.
 constexpr double kTexelEdge = 1e-4;
 
+// Filtered pixels: the footprint (|uv(x + 1) - uv(x)| or |uv(y + 1) - uv(y)| times the texture's
+// side) above kFilteredFootprint texels, where the viewer may average taps over the footprint
+// (its own footprint comes from ray differentials, so a margin below 1) and the CPU takes one
+// nearest texel: near the cylinder's silhouette and where many tiles are far away.
+constexpr double kFilteredFootprint = 0.9;
+
 Agreement Compare(const RenderOptions& scene, const Image& cpu, const Image& web, int tex_w, int tex_h) {
   Agreement a;
   std::vector<double> lum;
@@ -135,12 +141,15 @@ Agreement Compare(const RenderOptions& scene, const Image& cpu, const Image& web
   std::sort(lum.begin(), lum.end());
   a.level = lum[std::size_t(0.99 * (lum.size() - 1))];
   std::vector<char> hit(std::size_t(cpu.width) * cpu.height);
-  std::vector<double> edge_distance(hit.size(), 1.0);
+  std::vector<double> edge_distance(hit.size(), 1.0), footprint(hit.size(), 0.0);
   for (int y = 0; y < cpu.height; ++y)
     for (int x = 0; x < cpu.width; ++x) {
       const SurfacePoint sp = TracePixel(scene, x, y);
       hit[std::size_t(y) * cpu.width + x] = sp.hit;
-      if (sp.hit) edge_distance[std::size_t(y) * cpu.width + x] = TexelEdgeDistance(sp.uv, tex_w, tex_h);
+      if (!sp.hit) continue;
+      edge_distance[std::size_t(y) * cpu.width + x] = TexelEdgeDistance(sp.uv, tex_w, tex_h);
+      for (const SurfacePoint& q : {TracePixel(scene, x + 1, y), TracePixel(scene, x, y + 1)})
+        if (q.hit) footprint[std::size_t(y) * cpu.width + x] = std::max(footprint[std::size_t(y) * cpu.width + x], (q.uv - sp.uv).norm() * std::max(tex_w, tex_h));
     }
   double sum = 0;
   for (int y = 0; y < cpu.height; ++y)
@@ -152,13 +161,15 @@ Agreement Compare(const RenderOptions& scene, const Image& cpu, const Image& web
           any |= bool(hit[std::size_t(yy) * cpu.width + xx]), all &= bool(hit[std::size_t(yy) * cpu.width + xx]);
         }
       const bool silhouette = any && !all, texel_edge = edge_distance[std::size_t(y) * cpu.width + x] < kTexelEdge;
+      const bool filtered = !silhouette && !texel_edge && footprint[std::size_t(y) * cpu.width + x] > kFilteredFootprint;
       a.silhouette += silhouette;
       a.texel_edge += !silhouette && texel_edge;
-      a.inside += !silhouette && !texel_edge;
+      a.filtered += filtered;
+      a.inside += !silhouette && !texel_edge && !filtered;
       for (int c = 0; c < 3; ++c) {
         const double d = std::abs(double(web.at(x, y, c)) - cpu.at(x, y, c));
         sum += d;
-        if (!silhouette && !texel_edge && d > a.max_abs_inside) {
+        if (!silhouette && !texel_edge && !filtered && d > a.max_abs_inside) {
           a.max_abs_inside = d;
           a.worst_edge_distance = edge_distance[std::size_t(y) * cpu.width + x];
         }
@@ -180,21 +191,6 @@ Agreement Compare(const RenderOptions& scene, const Image& cpu, const Image& web
 // too. Measured on this twill: mean 0.95 % (patch-point) and 0.47 % (cylinder-env) of the level,
 // largest pixel 15 % and 14 % (at highlights, where the two interpolants differ most); the
 // bounds are 2x those (max_mean, max_pixel).
-// The largest texture footprint of a pixel of `scene` in texels (|uv(x + 1) - uv(x)| and the same
-// for y, times the texture's side), from the CPU renderer's rays: up to 1 the viewer takes the
-// nearest texel at the pixel's uv as the CPU renderer does; beyond, it averages taps over the
-// footprint (docs/viewer.md, "Tiling and filtering").
-double LargestFootprint(const RenderOptions& scene, int tex_w) {
-  double worst = 0;
-  for (int y = 0; y + 1 < scene.height; ++y)
-    for (int x = 0; x + 1 < scene.width; ++x) {
-      const SurfacePoint a = TracePixel(scene, x, y), b = TracePixel(scene, x + 1, y), c = TracePixel(scene, x, y + 1);
-      if (!a.hit || !b.hit || !c.hit) continue;
-      worst = std::max({worst, (b.uv - a.uv).norm() * tex_w, (c.uv - a.uv).norm() * tex_w});
-    }
-  return worst;
-}
-
 void ExpectSceneAgrees(const std::string& name, bool cpu_of_codec = false, double max_mean = 0.01, double max_pixel = 0.05,
                        Exporter exporter = Lpca, int width = 280, int height = 224, double tiles = 3) {
   SKIP_WITHOUT_CHROMIUM();
@@ -203,9 +199,6 @@ void ExpectSceneAgrees(const std::string& name, bool cpu_of_codec = false, doubl
   const std::filesystem::path cpu_source = cpu_of_codec ? codec_file : dir;
   RenderOptions scene = WebSceneOptions(name, width, height);
   scene.tiles = tiles;
-  // Every pixel within one texel: the viewer's footprint filter stays off, so both renderers take
-  // the nearest texel at the same uv.
-  ASSERT_LE(LargestFootprint(scene, Twill().width()), 1.0) << "tiles " << tiles;
   // Exposure: the CPU image's 99th-percentile luminance at display value 0.8 (as ComparisonPanel).
   Image linear;
   RenderCpu(cpu_source, scene, 1.0, tmp / "probe.png", name, &linear);
@@ -223,13 +216,14 @@ void ExpectSceneAgrees(const std::string& name, bool cpu_of_codec = false, doubl
   const Agreement a = Compare(scene, cpu, web, Twill().width(), Twill().height());
   std::cout << name << ExporterName(exporter) << (tiles != 3 ? " tiles " + std::to_string(tiles) : "") << (cpu_of_codec ? " (CPU: codec)" : " (CPU: export)") << ": level " << a.level << ", mean |diff| " << 100 * a.mean_abs / a.level << " %, max inside "
             << 100 * a.max_abs_inside / a.level << " % over " << a.inside << " pixels (left out: " << a.silhouette
-            << " silhouette, " << a.texel_edge << " texel-edge pixels; worst pixel " << a.worst_edge_distance
+            << " silhouette, " << a.texel_edge << " texel-edge, " << a.filtered << " filtered pixels; worst pixel " << a.worst_edge_distance
             << " texel from an edge), " << s.seconds << " s in the browser\n";
   EXPECT_GT(a.level, 0.5);  // the picture is not black (exposure maps the level to about 0.8)
   EXPECT_LE(a.mean_abs, max_mean * a.level);
   EXPECT_LE(a.max_abs_inside, max_pixel * a.level);
   EXPECT_GT(a.inside, width * height / 2);
   EXPECT_LT(a.texel_edge, width * height / 1000);  // the texel-edge exclusion stays small (< 0.1 % of the pixels)
+  EXPECT_LT(a.filtered, width * height / 20);      // and the filtered pixels' (< 5 %: 4.4 % for the cylinder at 140 x 112)
 }
 
 TEST(Browser, PatchPointAgreesWithTheCpuRender) { ExpectSceneAgrees("patch-point"); }
@@ -545,8 +539,8 @@ TEST(Browser, TiledPlaneRepeatsWithTheTilePeriodOnScreen) {
 }
 
 // The CPU renderer tiles the same way (RenderOptions::tiles; btf-eval render --tiles): with 5
-// repeats the patch-point pictures agree under the tolerances of the first row (every pixel's
-// footprint still within a texel, asserted, so the viewer takes the nearest texel).
+// repeats the patch-point pictures agree under the tolerances of the first row (the footprint
+// stays below 0.95 texels, so the viewer takes the nearest texel everywhere).
 TEST(Browser, TiledPatchPointAgreesWithTheCpuRender) { ExpectSceneAgrees("patch-point", false, 0.01, 0.05, Lpca, 280, 224, 5); }
 
 // The footprint filter: at R = 31 repeats a texel is 0.52 pixels of the 256-pixel top-down view
