@@ -36,7 +36,7 @@ const defaultScene = {
   shape: 'patch', lighting: 'point', width: 960, height: 640, tiles: 3, cylinder_radius: 0.6,
   camera: { position: [0, -3.2, 2.6], target: [0, 0, 0], up: [0, 0, 1], fov_y_deg: 32 },
   light: { position: [1.2, -1.4, 2.6], intensity: 10.2 }, background: 0.02, exposure: 1,
-  environment: { directions: [], radiance_solid_angle: [] },
+  environment: { directions: [], radiance_solid_angle: [] }, max_taps: 4,
 };
 
 // Export textures (docs/viewer.md, "Binding the textures"): layout schneider-2004 (LPCA, a 3D
@@ -176,6 +176,8 @@ uniform vec2 viewport;
 uniform int shape;         // 0 = patch, 1 = cylinder (both analytic), 2 = draped cloth (the mesh itself)
 uniform int lighting;      // 0 = point, 1 = environment
 uniform float tiles, radius, lightIntensity, exposure, background;
+uniform vec2 texSize;      // the export's texels per tile (W, H)
+uniform int maxTaps;       // the footprint filter's largest tap count per axis (1 = nearest texel only)
 uniform vec3 lightPos;
 uniform bool cosIncluded;
 uniform highp sampler2D envTex;  // row 0: directions, row 1: radiance * solid angle
@@ -211,6 +213,37 @@ bool hitShape(vec3 o, vec3 d, out vec3 p, out vec3 n, out vec3 tu, out vec3 tv, 
   return false;
 }
 
+// Radiance towards the camera at texture position uv: the point light or the sky's samples.
+vec3 shade(vec2 uv, vec3 p, vec3 tu, vec3 tv, vec3 n, vec3 wo) {
+  vec3 L = vec3(0.0);
+  if (lighting == 0) {
+    vec3 tl = lightPos - p;
+    float r2 = dot(tl, tl);
+    vec3 l = tl / sqrt(r2);
+    vec3 wi = vec3(dot(l, tu), dot(l, tv), dot(l, n));
+    if (wi.z > 0.0 && wo.z > 0.0) L += btf_eval(uv, wi, wo) * (cosIncluded ? 1.0 : wi.z) * lightIntensity / r2;
+  } else {
+    for (int i = 0; i < envCount; ++i) {
+      vec3 e = texelFetch(envTex, ivec2(i, 0), 0).xyz;
+      vec3 wi = vec3(dot(e, tu), dot(e, tv), dot(e, n));
+      if (wi.z <= 0.0 || wo.z <= 0.0) continue;
+      L += btf_eval(uv, wi, wo) * (cosIncluded ? 1.0 : wi.z) * texelFetch(envTex, ivec2(i, 1), 0).rgb;
+    }
+  }
+  return L;
+}
+
+// uv at the surface point seen through the pixel offset by (dx, dy) pixels: the offset ray meets
+// the tangent plane at p (a ray differential); the texture scale is tiles / 2 per unit of length
+// on the plane, along the cylinder and around it.
+vec2 uvOffset(vec3 o, vec3 p, vec3 n, vec3 tu, vec3 tv, vec2 s, vec2 ds) {
+  vec3 d = normalize(camForward + (s.x + ds.x) * camRight + (s.y + ds.y) * camUp);
+  float dn = dot(d, n);
+  if (abs(dn) < 1e-6) return vec2(1e6);
+  vec3 q = o + dot(p - o, n) / dn * d;
+  return 0.5 * tiles * vec2(dot(q - p, tu), dot(q - p, tv));
+}
+
 float srgb(float v) {
   v = clamp(v, 0.0, 1.0);
   return v <= 0.0031308 ? 12.92 * v : 1.055 * pow(v, 1.0 / 2.4) - 0.055;
@@ -219,7 +252,7 @@ float srgb(float v) {
 void main() {
   vec2 s = (2.0 * gl_FragCoord.xy / viewport - 1.0) * tanHalf * vec2(viewport.x / viewport.y, 1.0);
   vec3 o = camPos, d = normalize(camForward + s.x * camRight + s.y * camUp);
-  vec3 p, n, tu, tv; vec2 uv;
+  vec3 p, n, tu, tv; vec2 uv, duvx, duvy;
   vec3 L = vec3(background);
   bool hit;
   if (shape == 2) {
@@ -231,26 +264,33 @@ void main() {
     tv = cross(n, tu);
     uv = vUv * tiles;
     hit = true;
+    duvx = dFdx(uv);
+    duvy = dFdy(uv);
   } else {
     hit = hitShape(o, d, p, n, tu, tv, uv);
+    if (hit) {
+      float px = 2.0 * tanHalf / viewport.y;  // one pixel in s
+      duvx = uvOffset(o, p, n, tu, tv, s, vec2(px, 0.0));
+      duvy = uvOffset(o, p, n, tu, tv, s, vec2(0.0, px));
+    }
   }
   if (hit) {
     L = vec3(0.0);
     vec3 toCam = normalize(camPos - p);
     vec3 wo = vec3(dot(toCam, tu), dot(toCam, tv), dot(toCam, n));
-    if (lighting == 0) {
-      vec3 tl = lightPos - p;
-      float r2 = dot(tl, tl);
-      vec3 l = tl / sqrt(r2);
-      vec3 wi = vec3(dot(l, tu), dot(l, tv), dot(l, n));
-      if (wi.z > 0.0 && wo.z > 0.0) L += btf_eval(uv, wi, wo) * (cosIncluded ? 1.0 : wi.z) * lightIntensity / r2;
+    // The pixel's footprint in texels (the larger of its two edges): up to one texel, the nearest
+    // texel at the pixel's uv, as the CPU renderer; beyond, the mean of N x N taps spread evenly
+    // over the footprint parallelogram, N = ceil(footprint) up to maxTaps (the export's texels are
+    // decoded one by one, so no mipmaps: docs/viewer.md, "Tiling and filtering").
+    float footprint = max(length(duvx * texSize), length(duvy * texSize));
+    int N = footprint <= 1.0 ? 1 : min(int(ceil(footprint)), maxTaps);
+    if (N == 1) {
+      L = shade(uv, p, tu, tv, n, wo);
     } else {
-      for (int i = 0; i < envCount; ++i) {
-        vec3 e = texelFetch(envTex, ivec2(i, 0), 0).xyz;
-        vec3 wi = vec3(dot(e, tu), dot(e, tv), dot(e, n));
-        if (wi.z <= 0.0 || wo.z <= 0.0) continue;
-        L += btf_eval(uv, wi, wo) * (cosIncluded ? 1.0 : wi.z) * texelFetch(envTex, ivec2(i, 1), 0).rgb;
-      }
+      for (int j = 0; j < N; ++j)
+        for (int i = 0; i < N; ++i)
+          L += shade(uv + ((float(i) + 0.5) / float(N) - 0.5) * duvx + ((float(j) + 0.5) / float(N) - 0.5) * duvy, p, tu, tv, n, wo);
+      L /= float(N * N);
     }
   }
   L *= exposure;
@@ -287,6 +327,8 @@ function buildScene(exp, sc) {
     camPos: { value: new THREE.Vector3() }, camForward: { value: new THREE.Vector3() }, camRight: { value: new THREE.Vector3() },
     camUp: { value: new THREE.Vector3() }, tanHalf: { value: 0 }, viewport: { value: new THREE.Vector2() }, shape: { value: sc.shape === 'cylinder' ? 1 : 0 },
     lighting: { value: sc.lighting === 'environment' ? 1 : 0 }, tiles: { value: sc.tiles },
+    texSize: { value: new THREE.Vector2(exp.manifest.texture.width, exp.manifest.texture.height) },
+    maxTaps: { value: sc.max_taps },
     radius: { value: sc.cylinder_radius }, lightIntensity: { value: sc.light.intensity },
     exposure: { value: sc.exposure }, background: { value: sc.background },
     lightPos: { value: new THREE.Vector3(...sc.light.position) },
@@ -358,7 +400,7 @@ function makeRenderer(canvas, w, h) {
 function draw(renderer, view, cam, sc) {
   const gl = renderer.getContext();
   renderer.setRenderTarget(null);
-  const bg = srgbEncode(sc.background * sc.exposure);
+  const bg = srgbEncode(sc.background * view.uniforms.exposure.value);
   // The background radiance, tone-mapped like the shape (three.js's clear colour would be colour-managed).
   gl.clearColor(bg, bg, bg, 1);
   gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
@@ -426,6 +468,20 @@ async function main() {
   interactive(renderer, view, cam, sc, exp);
 }
 
+// The light's and the camera's directions at the object's reference point (the plane's centre, the
+// cylinder's and the cloth's top, where the normal is z and the frame's u and v are x and y), as
+// polar angle theta from the normal and azimuth phi from u, in degrees.
+export function anglesText(shape, lighting, light, camera, radius) {
+  const top = { patch: 0, cylinder: radius, cloth: 0.75 }[shape] ?? 0;
+  const polar = (q) => {
+    const v = new THREE.Vector3(q.x, q.y, q.z - top).normalize();
+    const theta = (Math.acos(Math.min(1, Math.max(-1, v.z))) * 180) / Math.PI, phi = (Math.atan2(v.y, v.x) * 180) / Math.PI;
+    return `theta ${theta.toFixed(1)}\u00b0 phi ${phi.toFixed(1)}\u00b0`;
+  };
+  const where = { patch: "the plane's centre", cylinder: "the cylinder's top", cloth: "the cloth's top" }[shape] ?? 'the centre';
+  return `light ${lighting === 'environment' ? 'sky' : polar(light)}; camera ${polar(camera)} (at ${where})`;
+}
+
 function glRendererName(renderer) {
   const gl = renderer.getContext();
   const ext = gl.getExtension('WEBGL_debug_renderer_info');
@@ -467,6 +523,7 @@ function evalQueries(renderer, exp) {
 }
 
 function interactive(renderer, view, cam, sc, exp) {
+  let dirty = true, avg = null;
   const controls = new OrbitControls(cam, renderer.domElement);
   controls.target.set(...sc.camera.target);
   controls.update();
@@ -494,17 +551,43 @@ function interactive(renderer, view, cam, sc, exp) {
   lightSel.value = sc.lighting;
   sceneSel.onchange = () => { view.setShape(sceneSel.value); dirty = true; };
   lightSel.onchange = () => { view.uniforms.lighting.value = lightSel.value === 'environment' ? 1 : 0; dirty = true; };
+  const u = view.uniforms, m = exp.manifest, W = m.texture.width, H = m.texture.height;
+  const on = (el, f) => { el.addEventListener('input', f); el.addEventListener('change', f); f(); };
+  // Exposure: a slider in stops (log2) around the start exposure (--exposure).
+  const e0 = sc.exposure, expIn = document.getElementById('exposure');
+  on(expIn, () => {
+    const stops = Number(expIn.value);
+    u.exposure.value = e0 * 2 ** stops;
+    document.getElementById('exposure-value').textContent =
+      `x${u.exposure.value.toPrecision(3)} (${stops >= 0 ? '+' : ''}${stops.toFixed(1)} stops from ${e0.toPrecision(3)})`;
+    dirty = true;
+  });
+  // Tiling: texture repeats along each side of the plane (the CPU renderer's `tiles`); the cylinder
+  // and the cloth at the same texel size.
+  const tilesIn = document.getElementById('tiles');
+  tilesIn.value = String(sc.tiles);
+  on(tilesIn, () => {
+    const r = Number(tilesIn.value);
+    if (!(Number.isFinite(r) && r > 0 && r <= 1000)) return;
+    u.tiles.value = r;
+    document.getElementById('tile-value').textContent =
+      `tile ${W} x ${H} texels = 1/${r.toPrecision(3)} of the plane's side (${Math.round(r * W)} texels across the plane)`;
+    dirty = true;
+  });
+  const tapsSel = document.getElementById('taps');
+  if (![...tapsSel.options].some((o) => o.value === String(sc.max_taps))) tapsSel.add(new Option(`<= ${sc.max_taps}x${sc.max_taps}`, String(sc.max_taps)));
+  tapsSel.value = String(sc.max_taps);
+  on(tapsSel, () => { u.maxTaps.value = Number(tapsSel.value); dirty = true; });
+  const anglesEl = document.getElementById('angles');
   addEventListener('resize', () => {
     renderer.setSize(innerWidth, innerHeight, false);
     cam.aspect = innerWidth / innerHeight;
     cam.updateProjectionMatrix();
     dirty = true;
   });
-  const m = exp.manifest;
   document.getElementById('info').textContent =
     `${m.texture.width}x${m.texture.height} texels, ${exp.info}; ${glRendererName(renderer)}`;
   const msEl = document.getElementById('ms');
-  let dirty = true, avg = null;
   const frame = () => {
     if (dirty) {
       dirty = false;
@@ -514,7 +597,10 @@ function interactive(renderer, view, cam, sc, exp) {
       const ms = performance.now() - t0;
       avg = avg === null ? ms : 0.8 * avg + 0.2 * ms;
       msEl.textContent = `${avg.toFixed(1)} ms/frame (${renderer.domElement.width}x${renderer.domElement.height})`;
+      anglesEl.textContent = anglesText(sceneSel.value, lightSel.value, light, cam.position, sc.cylinder_radius);
+      status.frames = (status.frames || 0) + 1;
     }
+    status.pending = dirty;
     requestAnimationFrame(frame);
   };
   frame();

@@ -5,8 +5,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <fstream>
 #include <random>
+#include <sstream>
 
 #include "libbtf/compress/codec.h"
 #include "libbtf/compress/compress.h"
@@ -104,7 +106,7 @@ double Luminance(const Image& im, int x, int y) {
 
 struct Agreement {
   double level = 0, mean_abs = 0, max_abs_inside = 0;
-  int inside = 0, silhouette = 0, texel_edge = 0;
+  int inside = 0, silhouette = 0, texel_edge = 0, filtered = 0;
   double worst_edge_distance = 0;  // texel-edge distance of the worst pixel inside (diagnostics)
 };
 
@@ -125,6 +127,12 @@ double TexelEdgeDistance(const Vec2& uv, int width, int height) {
 // nearest-texel lookup flips between float32 (browser) and double (CPU) arithmetic.
 constexpr double kTexelEdge = 1e-4;
 
+// Filtered pixels: the footprint (|uv(x + 1) - uv(x)| or |uv(y + 1) - uv(y)| times the texture's
+// side) above kFilteredFootprint texels, where the viewer may average taps over the footprint
+// (its own footprint comes from ray differentials, so a margin below 1) and the CPU takes one
+// nearest texel: near the cylinder's silhouette and where many tiles are far away.
+constexpr double kFilteredFootprint = 0.9;
+
 Agreement Compare(const RenderOptions& scene, const Image& cpu, const Image& web, int tex_w, int tex_h) {
   Agreement a;
   std::vector<double> lum;
@@ -133,12 +141,15 @@ Agreement Compare(const RenderOptions& scene, const Image& cpu, const Image& web
   std::sort(lum.begin(), lum.end());
   a.level = lum[std::size_t(0.99 * (lum.size() - 1))];
   std::vector<char> hit(std::size_t(cpu.width) * cpu.height);
-  std::vector<double> edge_distance(hit.size(), 1.0);
+  std::vector<double> edge_distance(hit.size(), 1.0), footprint(hit.size(), 0.0);
   for (int y = 0; y < cpu.height; ++y)
     for (int x = 0; x < cpu.width; ++x) {
       const SurfacePoint sp = TracePixel(scene, x, y);
       hit[std::size_t(y) * cpu.width + x] = sp.hit;
-      if (sp.hit) edge_distance[std::size_t(y) * cpu.width + x] = TexelEdgeDistance(sp.uv, tex_w, tex_h);
+      if (!sp.hit) continue;
+      edge_distance[std::size_t(y) * cpu.width + x] = TexelEdgeDistance(sp.uv, tex_w, tex_h);
+      for (const SurfacePoint& q : {TracePixel(scene, x + 1, y), TracePixel(scene, x, y + 1)})
+        if (q.hit) footprint[std::size_t(y) * cpu.width + x] = std::max(footprint[std::size_t(y) * cpu.width + x], (q.uv - sp.uv).norm() * std::max(tex_w, tex_h));
     }
   double sum = 0;
   for (int y = 0; y < cpu.height; ++y)
@@ -150,13 +161,15 @@ Agreement Compare(const RenderOptions& scene, const Image& cpu, const Image& web
           any |= bool(hit[std::size_t(yy) * cpu.width + xx]), all &= bool(hit[std::size_t(yy) * cpu.width + xx]);
         }
       const bool silhouette = any && !all, texel_edge = edge_distance[std::size_t(y) * cpu.width + x] < kTexelEdge;
+      const bool filtered = !silhouette && !texel_edge && footprint[std::size_t(y) * cpu.width + x] > kFilteredFootprint;
       a.silhouette += silhouette;
       a.texel_edge += !silhouette && texel_edge;
-      a.inside += !silhouette && !texel_edge;
+      a.filtered += filtered;
+      a.inside += !silhouette && !texel_edge && !filtered;
       for (int c = 0; c < 3; ++c) {
         const double d = std::abs(double(web.at(x, y, c)) - cpu.at(x, y, c));
         sum += d;
-        if (!silhouette && !texel_edge && d > a.max_abs_inside) {
+        if (!silhouette && !texel_edge && !filtered && d > a.max_abs_inside) {
           a.max_abs_inside = d;
           a.worst_edge_distance = edge_distance[std::size_t(y) * cpu.width + x];
         }
@@ -179,12 +192,13 @@ Agreement Compare(const RenderOptions& scene, const Image& cpu, const Image& web
 // largest pixel 15 % and 14 % (at highlights, where the two interpolants differ most); the
 // bounds are 2x those (max_mean, max_pixel).
 void ExpectSceneAgrees(const std::string& name, bool cpu_of_codec = false, double max_mean = 0.01, double max_pixel = 0.05,
-                       Exporter exporter = Lpca, int width = 280, int height = 224) {
+                       Exporter exporter = Lpca, int width = 280, int height = 224, double tiles = 3) {
   SKIP_WITHOUT_CHROMIUM();
   const auto tmp = test::TempDir(), dir = tmp / "export", codec_file = tmp / "codec.h5";
   exporter(dir, codec_file);
   const std::filesystem::path cpu_source = cpu_of_codec ? codec_file : dir;
-  const RenderOptions scene = WebSceneOptions(name, width, height);
+  RenderOptions scene = WebSceneOptions(name, width, height);
+  scene.tiles = tiles;
   // Exposure: the CPU image's 99th-percentile luminance at display value 0.8 (as ComparisonPanel).
   Image linear;
   RenderCpu(cpu_source, scene, 1.0, tmp / "probe.png", name, &linear);
@@ -200,15 +214,16 @@ void ExpectSceneAgrees(const std::string& name, bool cpu_of_codec = false, doubl
   ASSERT_EQ(web.width, width);
   ASSERT_EQ(web.height, height);
   const Agreement a = Compare(scene, cpu, web, Twill().width(), Twill().height());
-  std::cout << name << ExporterName(exporter) << (cpu_of_codec ? " (CPU: codec)" : " (CPU: export)") << ": level " << a.level << ", mean |diff| " << 100 * a.mean_abs / a.level << " %, max inside "
+  std::cout << name << ExporterName(exporter) << (tiles != 3 ? " tiles " + std::to_string(tiles) : "") << (cpu_of_codec ? " (CPU: codec)" : " (CPU: export)") << ": level " << a.level << ", mean |diff| " << 100 * a.mean_abs / a.level << " %, max inside "
             << 100 * a.max_abs_inside / a.level << " % over " << a.inside << " pixels (left out: " << a.silhouette
-            << " silhouette, " << a.texel_edge << " texel-edge pixels; worst pixel " << a.worst_edge_distance
+            << " silhouette, " << a.texel_edge << " texel-edge, " << a.filtered << " filtered pixels; worst pixel " << a.worst_edge_distance
             << " texel from an edge), " << s.seconds << " s in the browser\n";
   EXPECT_GT(a.level, 0.5);  // the picture is not black (exposure maps the level to about 0.8)
   EXPECT_LE(a.mean_abs, max_mean * a.level);
   EXPECT_LE(a.max_abs_inside, max_pixel * a.level);
   EXPECT_GT(a.inside, width * height / 2);
   EXPECT_LT(a.texel_edge, width * height / 1000);  // the texel-edge exclusion stays small (< 0.1 % of the pixels)
+  EXPECT_LT(a.filtered, width * height / 20);      // and the filtered pixels' (< 5 %: 4.4 % for the cylinder at 140 x 112)
 }
 
 TEST(Browser, PatchPointAgreesWithTheCpuRender) { ExpectSceneAgrees("patch-point"); }
@@ -447,6 +462,223 @@ TEST(Browser, NeuralGlslMatchesWithHalfLatentsFourierFeaturesAndSoftplus) {
 // (NeuralReferenceDecoder), under the tolerances of the first rows; the decoder runs per pixel
 // and light, so the patch under the point light only.
 TEST(Browser, NeuralPatchPointAgreesWithTheCpuRender) { ExpectSceneAgrees("patch-point", false, 0.01, 0.05, Neural); }
+
+// ---- The page's controls: tiling, its footprint filter, exposure, the angle readout ----------
+
+struct PageRun {
+  Image image;           // the canvas, decoded to linear
+  nlohmann::json panel;  // the panel's texts by element id
+};
+
+// The interactive page (mode=view) of `export_dir` in headless Chromium with `scene_json` as its
+// start scene and the controls in `ui` ([[id, value], ...]) set as a user sets them (input and
+// change events; JSON text); the frame they ask for is read from the canvas (viewer/render.mjs --mode canvas).
+PageRun RunPage(const std::filesystem::path& export_dir, const nlohmann::json& scene_json, const std::string& ui) {
+  const BrowserOptions b;
+  static int runs = 0;  // a job folder per run beside the export (test::TempDir would empty the test's folder)
+  const auto job = export_dir.parent_path() / ("page" + std::to_string(++runs)), png = job / "canvas.png";
+  std::filesystem::create_directories(job);
+  std::ofstream(job / "scene.json") << scene_json.dump();
+  std::string out;
+  const int rc = test::RunCommand(b.node + " '" + (ViewerDir(b) / "render.mjs").string() + "' --export '" + std::filesystem::absolute(export_dir).string() +
+                                      "' --job '" + std::filesystem::absolute(job).string() + "' --mode canvas --out '" + png.string() + "' --ui '" + ui + "' 2>&1",
+                                  &out);
+  std::istringstream lines(out);
+  std::string line, last;
+  while (std::getline(lines, line))
+    if (!line.empty()) last = line;
+  if (rc != 0) throw std::runtime_error("render.mjs --mode canvas failed: " + out);
+  return {ReadImage(png), nlohmann::json::parse(last).at("panel")};
+}
+
+// A view straight down on the plane (camera at height 32, up = y: nearly orthographic), `pixels`
+// square, spanning 2.048 units: a pixel is 2.048 / pixels units wide and the plane parallel to the
+// image, so a texture period is the same number of pixels everywhere. The point light far away (irradiance about
+// cos theta_i everywhere).
+nlohmann::json TopDownScene(int pixels, double tiles) {
+  RenderOptions o = WebSceneOptions("patch-point", pixels, pixels);
+  o.tiles = tiles;
+  o.light_position = Vec3(20, -25, 40);
+  o.light_intensity = o.light_position.squaredNorm();
+  nlohmann::json j = ViewerSceneJson(o, 1.0);
+  j["camera"] = {{"position", {0, 0, 32}}, {"target", {0, 0, 0}}, {"up", {0, 1, 0}},
+                 {"fov_y_deg", 2 * std::atan(1.024 / 32) * 180 / kPi}};
+  return j;
+}
+
+// Tiling: with R = 3.90625 repeats across the plane, a tile is 0.512 units = 64 pixels of the
+// top-down view (a texel 4 pixels, its edges on pixel edges). The mean |difference| of the image
+// and itself shifted by s pixels (x and y), over a 120 x 120 region on the plane, for s = 16..112:
+// smallest at s = 64, the period, and there far below the difference half a period away. What is
+// left at s = 64 is the change of view and light directions over one period (and 8-bit rounding).
+TEST(Browser, TiledPlaneRepeatsWithTheTilePeriodOnScreen) {
+  SKIP_WITHOUT_CHROMIUM();
+  const auto dir = test::TempDir() / "export";
+  TwillExport(dir);
+  const PageRun r = RunPage(dir, TopDownScene(256, 2.0 / 0.512), "[]");
+  ASSERT_EQ(r.image.width, 256);
+  auto diff = [&](int s) {
+    double sum = 0;
+    for (int y = 8; y < 128; ++y)
+      for (int x = 8; x < 128; ++x)
+        sum += std::abs(Luminance(r.image, x, y) - Luminance(r.image, x + s, y)) +
+               std::abs(Luminance(r.image, x, y) - Luminance(r.image, x, y + s));
+    return sum / (2 * 120 * 120);
+  };
+  int best = 0;
+  double best_d = 1e30, level = 0;
+  for (int s = 16; s <= 112; ++s)
+    if (const double d = diff(s); d < best_d) best = s, best_d = d;
+  for (int y = 8; y < 248; ++y)
+    for (int x = 8; x < 248; ++x) level += Luminance(r.image, x, y) / (240 * 240);
+  std::cout << "tiled plane (" << r.panel["tile-value"] << "): mean |I(p) - I(p + s)| smallest at s = " << best << " px ("
+            << best_d << "), at s = 32: " << diff(32) << ", at s = 63: " << diff(63) << "; mean luminance " << level << "\n";
+  EXPECT_EQ(best, 64);
+  EXPECT_LT(best_d, 0.1 * diff(32));
+  EXPECT_LT(best_d, 0.02 * level);
+}
+
+// The CPU renderer tiles the same way (RenderOptions::tiles; btf-eval render --tiles): with 5
+// repeats the patch-point pictures agree under the tolerances of the first row (the footprint
+// stays below 0.95 texels, so the viewer takes the nearest texel everywhere).
+TEST(Browser, TiledPatchPointAgreesWithTheCpuRender) { ExpectSceneAgrees("patch-point", false, 0.01, 0.05, Lpca, 280, 224, 5); }
+
+// The footprint filter: at R = 31 repeats a texel is 0.52 pixels of the 256-pixel top-down view
+// (footprint 1.94 texels: 2 x 2 taps, at the centres of the pixel's four quarters). The reference
+// is the box filter done by hand: the 512-pixel view (footprint 0.97: one tap, the nearest texel
+// at each pixel centre, which are the 256-pixel view's tap positions) averaged over 2 x 2 pixels.
+// Filtered against it: the same up to 8-bit rounding and the taps' shared view and light
+// directions; the nearest texel alone (filter "1 tap") is far from it (aliasing).
+TEST(Browser, FootprintFilterAveragesTheTexelsUnderAPixel) {
+  SKIP_WITHOUT_CHROMIUM();
+  const auto dir = test::TempDir() / "export";
+  TwillExport(dir);
+  const double tiles = 31;
+  const PageRun filtered = RunPage(dir, TopDownScene(256, tiles), "[]");
+  const PageRun nearest = RunPage(dir, TopDownScene(256, tiles), R"([["taps", "1"]])");
+  const PageRun fine = RunPage(dir, TopDownScene(512, tiles), R"([["taps", "1"]])");
+  std::vector<double> box, f;
+  double sum_f = 0, sum_n = 0;
+  for (int y = 8; y < 248; ++y)
+    for (int x = 8; x < 248; ++x) {
+      double b = 0;
+      for (int dy = 0; dy < 2; ++dy)
+        for (int dx = 0; dx < 2; ++dx) b += Luminance(fine.image, 2 * x + dx, 2 * y + dy) / 4;
+      box.push_back(b), f.push_back(std::abs(Luminance(filtered.image, x, y) - b));
+      sum_f += f.back(), sum_n += std::abs(Luminance(nearest.image, x, y) - b);
+    }
+  const int n = int(box.size());
+  std::sort(box.begin(), box.end());
+  const double level = box[std::size_t(0.99 * (n - 1))];  // the 99th-percentile luminance, as in Compare
+  const int off = int(std::count_if(f.begin(), f.end(), [&](double d) { return d > 0.05 * level; }));
+  std::cout << "footprint filter at " << tiles << " tiles (level " << level << "): mean |filtered - box of the 2x view| "
+            << 100 * sum_f / n / level << " % of the level (max " << 100 * *std::max_element(f.begin(), f.end()) / level << " %, "
+            << off << " of " << n << " pixels beyond 5 %), nearest texel alone " << 100 * sum_n / n / level << " %\n";
+  EXPECT_LE(sum_f / n, 0.01 * level);
+  EXPECT_LE(off, n / 200);
+  EXPECT_GE(sum_n, 4 * sum_f);
+}
+
+// Display value v = sRGB(clamp(exposure * L, 0, 1)): one stop more on the exposure slider doubles
+// every linear value that stays below 1. Per pixel and channel (decoded from the 8-bit canvas) the
+// difference |v_2 - 2 v_1| may be half an 8-bit step of v_2 plus twice half a step of v_1.
+double SrgbToLinear(double s) { return s <= 0.04045 ? s / 12.92 : std::pow((s + 0.055) / 1.055, 2.4); }
+double HalfStep(double v) {  // half the linear width of v's 8-bit sRGB step
+  const double s = std::round(255 * (v <= 0.0031308 ? 12.92 * v : 1.055 * std::pow(v, 1 / 2.4) - 0.055));
+  return 0.5 * (SrgbToLinear(std::min(255.0, s + 0.5) / 255) - SrgbToLinear(std::max(0.0, s - 0.5) / 255));
+}
+
+TEST(Browser, ExposureSliderDoublesTheLinearValuesPerStop) {
+  SKIP_WITHOUT_CHROMIUM();
+  const auto dir = test::TempDir() / "export";
+  TwillExport(dir);
+  const nlohmann::json scene = ViewerSceneJson(WebSceneOptions("patch-point", 280, 224), 1.0);
+  const PageRun one = RunPage(dir, scene, "[]"), two = RunPage(dir, scene, R"([["exposure", "1"]])");
+  EXPECT_EQ(one.panel["exposure-value"], "x1.00 (+0.0 stops from 1.00)");
+  EXPECT_EQ(two.panel["exposure-value"], "x2.00 (+1.0 stops from 1.00)");
+  int compared = 0, beyond = 0, beyond_5_percent_off = 0;
+  for (int y = 0; y < 224; ++y)
+    for (int x = 0; x < 280; ++x)
+      for (int c = 0; c < 3; ++c) {
+        const double v1 = one.image.at(x, y, c), v2 = two.image.at(x, y, c);
+        if (v1 < 0.01 || v1 > 0.45) continue;
+        ++compared;
+        beyond += std::abs(v2 - 2 * v1) > HalfStep(v2) + 2 * HalfStep(v1) + 1e-7;
+        // The same bound for a factor 2.1: a slider 5 % off would show.
+        beyond_5_percent_off += std::abs(v2 - 2.1 * v1) > HalfStep(v2) + 2.1 * HalfStep(v1) + 1e-7;
+      }
+  std::cout << "exposure +1 stop: " << beyond << " of " << compared << " values beyond 8-bit rounding of v2 = 2 v1 ("
+            << beyond_5_percent_off << " of v2 = 2.1 v1)\n";
+  EXPECT_GT(compared, 280 * 224);  // most of the picture (the shape and the background) is compared
+  EXPECT_EQ(beyond, 0);
+  EXPECT_GT(beyond_5_percent_off, compared / 2);
+}
+
+// The panel's angles: theta (from the normal) and phi (from u) of the light and the camera at the
+// object's reference point, for the start scene (patch-point: the plane's centre) and after the
+// shape selector switched to the cylinder (its top, 0.6 above the axis), against the scene's
+// numbers (RenderOptions's light, RenderCamera) computed here; printed with one decimal.
+void ExpectAngles(const std::string& text, const Vec3& at) {
+  const RenderOptions o;
+  const RenderCamera cam;
+  auto angles = [&](const Vec3& q) {
+    const Vec3 v = (q - at).normalized();
+    return std::pair(std::acos(v.z()) * 180 / kPi, std::atan2(v.y(), v.x()) * 180 / kPi);
+  };
+  const auto [lt, lp] = angles(o.light_position);
+  const auto [ct, cp] = angles(cam.position);
+  double got[4];
+  ASSERT_EQ(std::sscanf(text.c_str(), "light theta %lf\u00b0 phi %lf\u00b0; camera theta %lf\u00b0 phi %lf\u00b0", &got[0], &got[1],
+                        &got[2], &got[3]),
+            4)
+      << text;
+  const double want[4] = {lt, lp, ct, cp};
+  for (int i = 0; i < 4; ++i) EXPECT_NEAR(got[i], want[i], 0.05 + 1e-9) << text << " (angle " << i << ")";
+}
+
+TEST(Browser, AngleReadoutMatchesTheScene) {
+  SKIP_WITHOUT_CHROMIUM();
+  const auto dir = test::TempDir() / "export";
+  TwillExport(dir);
+  const nlohmann::json scene = ViewerSceneJson(WebSceneOptions("patch-point", 140, 112), 1.0);
+  const PageRun plane = RunPage(dir, scene, "[]"), cylinder = RunPage(dir, scene, R"([["scene", "cylinder"]])");
+  std::cout << "angles: " << plane.panel["angles"] << "; " << cylinder.panel["angles"] << "\n";
+  ExpectAngles(plane.panel["angles"], Vec3(0, 0, 0));
+  ExpectAngles(cylinder.panel["angles"], Vec3(0, 0, kCylinderRadius));
+  EXPECT_NE(plane.panel["angles"], cylinder.panel["angles"]);
+}
+
+// Every layout's btf_eval wraps uv (period 1): the same queries shifted by whole periods give the
+// same values (texel positions in the texels' central halves, so float32 rounding of uv + k
+// cannot move a query to another texel).
+TEST(Browser, EveryLayoutsGlslWrapsUv) {
+  SKIP_WITHOUT_CHROMIUM();
+  for (Exporter exporter : {Lpca, PcaView, Neural}) {
+    const auto dir = test::TempDir() / "export";
+    exporter(dir, {});
+    Queries qs;
+    std::mt19937 rng(5);
+    qs.AddRandom(Twill().width(), Twill().height(), 512, rng);
+    const std::size_t n = qs.size();
+    for (const auto& [du, dv] : {std::pair(3, -2), std::pair(-1, 5)})
+      for (std::size_t i = 0; i < n; ++i) {
+        qs.q.insert(qs.q.end(), qs.q.begin() + i * 8, qs.q.begin() + i * 8 + 8);
+        qs.q[qs.q.size() - 8] += du, qs.q[qs.q.size() - 7] += dv;
+      }
+    const std::vector<float> got = EvaluateInBrowser(BrowserOptions{}, dir, qs.q);
+    ASSERT_EQ(got.size(), 3 * n * 3);
+    double worst = 0, largest = 0;
+    for (std::size_t k = 1; k < 3; ++k)
+      for (std::size_t i = 0; i < n * 3; ++i) {
+        worst = std::max(worst, double(std::abs(got[k * n * 3 + i] - got[i])));
+        largest = std::max(largest, double(std::abs(got[i])));
+      }
+    std::cout << ExporterName(exporter) << ": largest |btf_eval(uv + k) - btf_eval(uv)| " << worst << " (values up to " << largest
+              << ")\n";
+    EXPECT_GT(largest, 0);
+    EXPECT_LE(worst, 1e-6 * largest);
+  }
+}
 
 }  // namespace
 }  // namespace btf

@@ -29,7 +29,7 @@ struct StabilityFlags {
 // view, render-web and render: one set of flags (docs/btf-eval.md, "Viewer and renders").
 struct SceneFlags {
   std::string source, output, scene = "patch-point", size = "280x224";
-  double exposure = 1;
+  double exposure = 1, tiles = 3;
   int port = 8000, frames = 0;
   bool page = false;
   btf::BrowserOptions browser;
@@ -47,10 +47,15 @@ struct SceneFlags {
       btf::ThrowUsage("invalid option '--size': '{}' is not WIDTHxHEIGHT (e.g. 1280x720)", size);
     }
     if (!(std::isfinite(exposure) && exposure > 0)) btf::ThrowUsage("invalid option '--exposure': must be > 0");
+    if (!(std::isfinite(tiles) && tiles > 0 && tiles <= 1000)) btf::ThrowUsage("invalid option '--tiles': must be in (0, 1000]");
     if (frames < 0 || frames > 10000) btf::ThrowUsage("invalid option '--frames': must be 0..10000");
     browser.Check();
   }
-  btf::RenderOptions Scene() const { return btf::WebSceneOptions(scene, width, height); }
+  btf::RenderOptions Scene() const {
+    btf::RenderOptions o = btf::WebSceneOptions(scene, width, height);
+    o.tiles = tiles;
+    return o;
+  }
 };
 
 int RunView(SceneFlags& f) {
@@ -192,11 +197,13 @@ int main(int argc, char** argv) {
 
   // The viewer (docs/viewer.md) and the two renders of one scene.
   SceneFlags vf, wf, rf;
+  vf.tiles = 12;  // the interactive viewer starts with the material repeating at a cloth-like scale
   auto add_scene = [](CLI::App* c, SceneFlags& f) {
     c->add_option("--scene", f.scene, "Scene: patch-point (flat patch, point light) or cylinder-env (cylinder, sampled sky)")
         ->check(CLI::IsMember(btf::WebSceneNames()));
     c->add_option("--size", f.size, "Image size WIDTHxHEIGHT in pixels");
     c->add_option("--exposure", f.exposure, "Display value = sRGB(clamp(exposure * radiance, 0, 1))");
+    c->add_option("--tiles", f.tiles, "Texture repeats along each side of the plane (the cylinder and the cloth at the same texel size)");
   };
   auto add_browser = [](CLI::App* c, SceneFlags& f) {
     c->add_option("--chromium", f.browser.chromium, "Chromium executable");
