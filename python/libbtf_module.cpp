@@ -365,6 +365,7 @@ auto CompressKeywords() {
       Member("neural_epochs", [](auto& o) -> auto& { return o.neural.epochs; }),
       Member("neural_batch", [](auto& o) -> auto& { return o.neural.batch; }),
       Member("neural_lr", [](auto& o) -> auto& { return o.neural.learning_rate; }),
+      Member("neural_linear_loss", [](auto& o) -> auto& { return o.neural.linear_loss; }),
       // The path of a scene.json (SceneSpec::Load); a default CompressOptions has no scene: None.
       Converted<Path>(
           "scene", [](const CompressOptions&) { return Path(); },

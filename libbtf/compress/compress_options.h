@@ -68,20 +68,24 @@ struct LpcaTensorOptions {
 // The neural codec (neural_codec.h, neural_net.h): its shape, training set and training. The
 // provenance names are those of ToJson (neural_latent, ...), the flags --neural-latent etc.
 struct NeuralOptions {
-  int latent = 8;                   // latent values per texel (the maximum with --bytes)
+  // The defaults: on the 128² bonn81 twill (bench/neural_vs_linear.sh, docs/btf-compress.md
+  // "Neural codec") relative error 0.113 at 269,836 bytes, where lpca-tensor needs 3 MB for 0.126.
+  // Against them: latent 8 (137,676 bytes), 2^24 samples in 4 epochs, linear_loss 0 / 0.25 / 0.5 /
+  // 0.75 / 1: 0.309 / 0.225 / 0.232 / 0.255 / 0.280. Hidden 64,64 with latent 8 reaches 0.088 at
+  // 152,396 bytes (2^25 samples, 8 epochs) but its steps take about 3x longer and it decodes about
+  // 3x slower.
+  int latent = 16;                  // latent values per texel (the maximum with --bytes)
   std::vector<int> hidden{32, 32};  // decoder hidden widths
   int fourier = 0;                  // Fourier octaves of the direction encoding (0..8); the half vector always
   std::string latent_storage = "uint8";  // "uint8" (codes, scale and bias per latent channel) or "half"
   // Training samples (texel, light, view), drawn per view slot in one pass (4 (7 + C) bytes each:
-  // 671 MB for RGB). 2^24 in 4 epochs (16384 steps of 4096): on the 128² bonn81 twill
-  // (bench/neural_vs_linear.sh) relative error 0.309 where 2^20 in 16 epochs (4096 steps) left
-  // 2.58, its latents seen ~64 times a texel and wild at grazing pairs.
-  std::int64_t samples = std::int64_t(1) << 24;
+  // 1.34 GB for RGB). 2^25 in 8 epochs (65536 steps of 4096).
+  std::int64_t samples = std::int64_t(1) << 25;
   std::int64_t steps = 0;           // > 0: training steps; 0: ceil(epochs * samples / batch)
-  double epochs = 4;
+  double epochs = 8;
   int batch = 4096;                 // samples per step
   double learning_rate = 1e-2;      // decoder and latents, at step 0 (cosine decay to 5 %)
-  double linear_loss = 0;           // weight of the linear-domain term in the loss (NeuralTrainOptions)
+  double linear_loss = 0.5;         // weight of the linear-domain term in the loss (NeuralTrainOptions)
   void Check() const;
 };
 

@@ -235,7 +235,8 @@ def test_compress_matches_btf_compress(data):
 
 # The neural codec's options: keyword -> the btf-compress flag with the same value.
 NEURAL = dict(neural_latent=4, neural_hidden=[16, 8], neural_fourier=1, neural_latent_storage="half",
-              neural_samples=3000, neural_steps=60, neural_epochs=3, neural_batch=512, neural_lr=0.02)
+              neural_samples=3000, neural_steps=60, neural_epochs=3, neural_batch=512, neural_lr=0.02,
+              neural_linear_loss=0.25)
 
 
 def neural_flags(**kw):

@@ -76,6 +76,7 @@ const Codec& TwillNeuralCodec() {
     CompressOptions co;
     co.method = CodecMethod::kNeural;
     co.seed = 7;
+    co.neural.latent = 8;
     co.neural.samples = 1 << 16;
     co.neural.batch = 1024;
     co.neural.steps = 400;
