@@ -222,7 +222,7 @@ TEST(RigAccuracy, CalibrateFisheyeRecoversTheFisheyeCamera) {
   // The calibration set (15 AprilGrid photos, 640 x 480, f = 500 px, views 0-14 of bonn81,
   // 90 mm away) through a fisheye lens (OpenCV's equidistant model) with k1..k4 = 0.08, -0.02, 0, 0.
   // `calibrate --model fisheye` fits all four coefficients. Bounds: the radtan ones (fx,
-  // fy within 0.2 %, k1 within 2 %, RMS <= 0.1 px); k2..k4 are not bounded one by one: at
+  // fy within 0.2 %, RMS <= 0.1 px; k1 below); k2..k4 are not bounded one by one: at
   // theta <= 0.68 rad (the image corner, atan(400 / 500)) k2 theta^4, k3 theta^6 and k4 theta^8
   // trade off against each other (measured k3 -0.052, k4 0.087 against 0). The lens as a whole is
   // checked instead: the image radius rd(theta) = fx theta_d(theta) of the recovered lens within
@@ -261,11 +261,16 @@ TEST(RigAccuracy, CalibrateFisheyeRecoversTheFisheyeCamera) {
   EXPECT_EQ(j["views_used"], 15);
   EXPECT_LT(std::abs(k.fx / 500 - 1), 0.002);
   EXPECT_LT(std::abs(k.fy / 500 - 1), 0.002);
-  EXPECT_LT(std::abs(k.k1 / 0.08 - 1), 0.02);
+  // k1 trades off against k2..k4 too (measured 0.0854 with the X-junction corner fit, 0.0800 with
+  // the edge fit alone, whose corners are 2 x further from the truth on these photos): bounded at
+  // 10 %, while the lens as a whole is held tighter than before: within 0.4 px (measured 0.23;
+  // 0.30 with the edge fit alone) besides the 0.2 % of the corner radius.
+  EXPECT_LT(std::abs(k.k1 / 0.08 - 1), 0.1);
   EXPECT_LT(worst, 0.002 * rd(m.photos[0].camera, std::atan(0.8)));
+  EXPECT_LT(worst, 0.4);
   EXPECT_LE(c.rms_px, 0.1);
   // For comparison only (printed, no bound): radtan with k1, k2, p1, p2, k3 fits this lens about as
-  // well at this field of view (measured RMS 0.0770 px, as the fisheye fit).
+  // well at this field of view (measured RMS 0.055 px, as the fisheye fit).
   ASSERT_EQ(test::RunCommand(test::Tool("btf-register") + " calibrate --quiet --json " + (dir / "manifest.json").string() +
                                  " --board " + (dir / "board.json").string() + " -o " + (dir / "radtan.json").string(),
                              &out),
