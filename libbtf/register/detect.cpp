@@ -125,6 +125,9 @@ void TagDetectorOptions::Check() const {
   BTF_CHECK_OPTION(max_hamming >= 0 && max_hamming <= 3, "max_hamming", "0..3");
   BTF_CHECK_OPTION(std::isfinite(min_decision_margin) && min_decision_margin >= 0, "min_decision_margin", ">= 0");
   BTF_CHECK_OPTION(std::isfinite(border_margin_px) && border_margin_px >= 0, "border_margin_px", ">= 0");
+  BTF_CHECK_OPTION(x_corners == "lines" || x_corners == "cornersubpix" || x_corners == "none", "x_corners",
+                   "lines, cornersubpix or none");
+  BTF_CHECK_OPTION(std::isfinite(subpix_window) && subpix_window > 0 && subpix_window <= 1, "subpix_window", "(0, 1]");
 }
 
 std::vector<std::string> TagFamilies() {
@@ -401,6 +404,45 @@ std::vector<unsigned char> GrayForDetection(const Image& image) { return Quantiz
 
 namespace {
 
+// The dark -> bright step on the profile through p along the unit `normal` (dark side at -normal),
+// over [-module / 2, module / 2]: false if the profile has no contrast, leaves the image or puts the
+// step outside the window.
+bool EdgeOnProfile(const std::vector<float>& gray, int w, int h, const Vec2& p, const Vec2& normal, double module,
+                   Vec2* edge) {
+  bool ok = true;
+  const double dark = Bilinear(gray, w, h, p.x() - 0.5 * module * normal.x(), p.y() - 0.5 * module * normal.y(), &ok);
+  const double bright = Bilinear(gray, w, h, p.x() + 0.5 * module * normal.x(), p.y() + 0.5 * module * normal.y(), &ok);
+  if (!ok || !(bright - dark > 1e-6)) return false;
+  // Edge position from the profile's area: for a step from `dark` to `bright` at s_e, the
+  // integral of the normalized profile over [-m/2, m/2] is m/2 - s_e, and any blur narrower
+  // than the window preserves it. Less sensitive to interpolation error than a level crossing.
+  const int nsteps = std::max(8, static_cast<int>(module / 0.05));
+  const double step = module / nsteps;
+  double area = 0;
+  for (int k = 0; k <= nsteps && ok; ++k) {
+    const double s = -0.5 * module + k * step;
+    const double v = Bilinear(gray, w, h, p.x() + s * normal.x(), p.y() + s * normal.y(), &ok);
+    const double u = std::clamp((v - dark) / (bright - dark), 0.0, 1.0);
+    area += (k == 0 || k == nsteps ? 0.5 : 1.0) * u * step;
+  }
+  const double best = 0.5 * module - area;
+  if (!ok || !(std::abs(best) < 0.5 * module)) return false;
+  *edge = p + best * normal;
+  return true;
+}
+
+// Total-least-squares line a x + b y + d = 0, (a, b) unit.
+Eigen::Vector3d FitLine(const std::vector<Vec2>& pts) {
+  Vec2 mean = Vec2::Zero();
+  for (const auto& q : pts) mean += q;
+  mean /= static_cast<double>(pts.size());
+  Eigen::Matrix2d cov = Eigen::Matrix2d::Zero();
+  for (const auto& q : pts) cov += (q - mean) * (q - mean).transpose();
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(cov);
+  const Vec2 n = es.eigenvectors().col(0);  // smallest eigenvalue: the normal
+  return Eigen::Vector3d(n.x(), n.y(), -n.dot(mean));
+}
+
 // Sub-pixel corner refinement used by Detect(const Image&) when refine_corners is set: along each
 // edge of the quad, the 50% crossing between the black border level (half a module inside) and
 // the quiet-zone level (half a module outside) is located on profiles normal to the edge in the
@@ -432,36 +474,11 @@ bool RefineTagCorners(const std::vector<float>& gray, int w, int h, int modules,
         // Stay a module away from the corners, where the neighboring edge bends the profile.
         const double t = module / len + (1 - 2 * module / len) * (i + 0.5) / samples;
         if (t <= 0 || t >= 1) continue;
-        const Vec2 p = a + t * (b - a);
-        bool ok = true;
-        const double dark = Bilinear(gray, w, h, p.x() - 0.5 * module * normal.x(), p.y() - 0.5 * module * normal.y(), &ok);
-        const double bright = Bilinear(gray, w, h, p.x() + 0.5 * module * normal.x(), p.y() + 0.5 * module * normal.y(), &ok);
-        if (!ok || !(bright - dark > 1e-6)) continue;
-        // Edge position from the profile's area: for a step from `dark` to `bright` at s_e, the
-        // integral of the normalized profile over [-m/2, m/2] is m/2 - s_e, and any blur narrower
-        // than the window preserves it. Less sensitive to interpolation error than a level crossing.
-        const int nsteps = std::max(8, static_cast<int>(module / 0.05));
-        const double step = module / nsteps;
-        double area = 0;
-        for (int k = 0; k <= nsteps && ok; ++k) {
-          const double s = -0.5 * module + k * step;
-          const double v = Bilinear(gray, w, h, p.x() + s * normal.x(), p.y() + s * normal.y(), &ok);
-          const double u = std::clamp((v - dark) / (bright - dark), 0.0, 1.0);
-          area += (k == 0 || k == nsteps ? 0.5 : 1.0) * u * step;
-        }
-        const double best = 0.5 * module - area;
-        if (ok && std::abs(best) < 0.5 * module) pts.push_back(p + best * normal);
+        Vec2 q;
+        if (EdgeOnProfile(gray, w, h, a + t * (b - a), normal, module, &q)) pts.push_back(q);
       }
       if (pts.size() < 4) return false;
-      // Total least squares line.
-      Vec2 mean = Vec2::Zero();
-      for (const auto& q : pts) mean += q;
-      mean /= static_cast<double>(pts.size());
-      Eigen::Matrix2d cov = Eigen::Matrix2d::Zero();
-      for (const auto& q : pts) cov += (q - mean) * (q - mean).transpose();
-      Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(cov);
-      const Vec2 n = es.eigenvectors().col(0);  // smallest eigenvalue: the normal
-      lines[e] = Eigen::Vector3d(n.x(), n.y(), -n.dot(mean));
+      lines[e] = FitLine(pts);
     }
     std::array<Vec2, 4> refined;
     for (int k = 0; k < 4; ++k) {
@@ -474,6 +491,88 @@ bool RefineTagCorners(const std::vector<float>& gray, int w, int h, int modules,
     c = refined;
   }
   return true;
+}
+
+// Is corner k of c an X-junction (dark outward diagonal)? u, v: one module along each edge.
+bool IsXJunction(const std::vector<float>& gray, int w, int h, const Vec2& c, const Vec2& u, const Vec2& v) {
+  bool ok = true;
+  const Vec2 b = c + 0.5 * (u + v), g1 = c + 1.5 * v - 0.5 * u, g2 = c + 1.5 * u - 0.5 * v, o = c - 0.5 * (u + v);
+  const double black = Bilinear(gray, w, h, b.x(), b.y(), &ok);
+  const double white = 0.5 * (Bilinear(gray, w, h, g1.x(), g1.y(), &ok) + Bilinear(gray, w, h, g2.x(), g2.y(), &ok));
+  const double out = Bilinear(gray, w, h, o.x(), o.y(), &ok);
+  return ok && white > 2 * black && out < 0.5 * (black + white);
+}
+
+constexpr int kXLinePasses = 3;
+
+// X-junction corners by lines: each of the corner's two edges continues past the junction as the
+// corner square's edge, with the dark side swapped. One line per edge through edge points on both
+// sides, at the same distances (1..2 modules) from the corner: a tone curve or a one-sided blur
+// moves the two sides' points in opposite directions, and the line at the corner is their mean.
+void RefineXCornersByLines(const std::vector<float>& gray, int w, int h, int modules, std::array<Vec2, 4>* corners) {
+  std::array<Vec2, 4>& c = *corners;
+  const std::array<Vec2, 4> first = c;
+  for (int k = 0; k < 4; ++k) {
+    const Vec2 u = (first[(k + 3) % 4] - first[k]) / modules, v = (first[(k + 1) % 4] - first[k]) / modules;
+    const double module = std::min(u.norm(), v.norm());
+    if (!(module > 1.0) || !IsXJunction(gray, w, h, first[k], u, v)) continue;
+    // Passes: the sample distances are mirrored about the current corner, so a first corner off by
+    // a tone curve's shift is refined again from the better one.
+    for (int pass = 0; pass < kXLinePasses; ++pass) {
+    std::array<Eigen::Vector3d, 2> lines;
+    bool ok = true;
+    for (int e = 0; e < 2 && ok; ++e) {
+      const Vec2 along = (e == 0 ? u : v).normalized(), other = e == 0 ? v : u;
+      Vec2 normal(-along.y(), along.x());  // outward from the tag across this edge
+      if (normal.dot(other) > 0) normal = -normal;
+      const double m = std::abs(other.dot(normal));  // the module across this edge
+      const int n = std::max(4, static_cast<int>(m / 0.5));
+      std::vector<Vec2> pts;
+      int tag_side = 0, square_side = 0;
+      for (int i = 0; i < n; ++i) {
+        const double t = (1 + (i + 0.5) / n) * (e == 0 ? u : v).norm();
+        Vec2 q;
+        if (EdgeOnProfile(gray, w, h, c[k] + t * along, normal, m, &q)) pts.push_back(q), ++tag_side;
+        if (EdgeOnProfile(gray, w, h, c[k] - t * along, -normal, m, &q)) pts.push_back(q), ++square_side;
+      }
+      ok = tag_side >= 3 && square_side >= 3;
+      if (ok) lines[static_cast<std::size_t>(e)] = FitLine(pts);
+    }
+    const Eigen::Vector3d x = lines[0].cross(lines[1]);
+    if (!ok || !(std::abs(x.z()) > 1e-12)) {
+      c[k] = first[k];
+      break;
+    }
+    const Vec2 r = x.head<2>() / x.z();
+    if (!r.allFinite() || (r - first[k]).norm() > module) {
+      c[k] = first[k];
+      break;
+    }
+    c[k] = r;
+    }
+  }
+}
+
+// The X-junction refinement of the header ("Corner refinement"). `border` = border_bits; corners
+// that are not X-junctions, or whose refinement fails its checks, are left as they are.
+void RefineXCorners(const std::vector<float>& gray, int w, int h, int modules, int border, double window,
+                    std::array<Vec2, 4>* corners) {
+  std::array<Vec2, 4>& c = *corners;
+  const cv::Mat imf(h, w, CV_32FC1, const_cast<float*>(gray.data()));
+  for (int k = 0; k < 4; ++k) {
+    // One module along each edge from corner k towards the tag's other corners.
+    const Vec2 u = (c[(k + 3) % 4] - c[k]) / modules, v = (c[(k + 1) % 4] - c[k]) / modules;
+    const double module = std::min(u.norm(), v.norm());
+    if (!(module > 1.0)) continue;
+    if (!IsXJunction(gray, w, h, c[k], u, v)) continue;  // no contrast, or an L corner
+    const int half = std::max(2, static_cast<int>(window * border * module / std::sqrt(2.0)));
+    if (!(c[k].x() >= half + 1 && c[k].y() >= half + 1 && c[k].x() <= w - 2 - half && c[k].y() <= h - 2 - half)) continue;
+    std::vector<cv::Point2f> p = {cv::Point2f(static_cast<float>(c[k].x()), static_cast<float>(c[k].y()))};
+    cv::cornerSubPix(imf, p, cv::Size(half, half), cv::Size(-1, -1),
+                     cv::TermCriteria(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 100, 1e-4));
+    const Vec2 r(p[0].x, p[0].y);
+    if (r.allFinite() && (r - c[k]).norm() <= module) c[k] = r;
+  }
 }
 
 }  // namespace
@@ -592,6 +691,11 @@ std::vector<TagDetection> TagDetector::Detect(const Image& image) const {
     for (auto& d : dets) {
       std::array<Vec2, 4> c = d.corners;
       if (RefineTagCorners(gray, image.width, image.height, impl_->modules, &c)) d.corners = c;
+      if (options_.x_corners == "lines")
+        RefineXCornersByLines(gray, image.width, image.height, impl_->modules, &d.corners);
+      else if (options_.x_corners == "cornersubpix")
+        RefineXCorners(gray, image.width, image.height, impl_->modules, options_.border_bits, options_.subpix_window,
+                       &d.corners);
     }
   return dets;
 }

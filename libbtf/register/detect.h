@@ -33,6 +33,11 @@ struct TagDetectorOptions {
   bool refine_edges = false;        // libapriltag's edge refinement: biased by -0.125 px in 3.3.0 (integer
                                     // sampling; measured in tests/register/detect_test.cpp), so off
   bool refine_corners = true;       // our own sub-pixel edge fit on the linear float image (see below)
+  std::string x_corners = "lines";  // with refine_corners: a corner that is an X-junction (the tag's corner
+                                    // touches a dark square diagonally, Kalibr's AprilGrid) is then refined
+                                    // by "lines", "cornersubpix" or "none" (see below); others keep the edge fit
+  double subpix_window = 0.75;      // cornerSubPix window: its corners reach this fraction of the border
+                                    // width (border_bits modules) from the corner; (0, 1]
   double decode_sharpening = 0.25;  // libapriltag default
   int max_hamming = 1;              // detections correcting more bits are dropped (false positives; AprilTag only)
   double min_decision_margin = 20;  // weaker detections are dropped (AprilTag only; ArUco reports 0)
@@ -51,6 +56,19 @@ struct TagDetection {
   Vec2 center = Vec2::Zero();   // px, OpenCV convention
 };
 
+// Corner refinement (Detect(const Image&), refine_corners): first the edge fit: along each edge
+// the black border / quiet zone step is located on normal profiles (the profile's area between
+// the two levels), one total-least-squares line per edge, corners = intersections of adjacent
+// lines. It assumes straight edges (no lens distortion across the tag) and linear intensities (a
+// tone curve moves a blurred edge's 50 % point). Then, with subpix_x_corners, each corner whose
+// outward diagonal is dark (black at half a module, against the border and the two quiet zones
+// beside it: an X-junction) is refined by cv::cornerSubPix on the linear gray image (100
+// iterations / 1e-4 px) in a square window of half-size subpix_window x border_bits x the
+// smaller module length at that corner / sqrt 2 (at least 2 px): the window stays in the black
+// border, the corner square and the white gaps. A blurred X-junction is point-symmetric about
+// its centre whatever the tone curve, and the window is local, so this corner is unbiased by
+// gamma and by the edges' curvature. A result moving more than one module is not used.
+//
 // Families this build can create (libapriltag's, then "aruco:DICT_..." names).
 std::vector<std::string> TagFamilies();
 

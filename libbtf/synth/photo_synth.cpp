@@ -167,6 +167,8 @@ void PhotoOptions::Check() const {
   BTF_CHECK_OPTION(width >= 16 && height >= 16 && width <= 16384 && height <= 16384, "width/height", "16..16384 px");
   BTF_CHECK_OPTION(std::isfinite(camera_distance_mm) && camera_distance_mm > 0, "camera-distance", "> 0 mm");
   BTF_CHECK_OPTION(std::isfinite(focal_px) && focal_px >= 0, "focal", ">= 0 px (0 = auto)");
+  BTF_CHECK_OPTION(std::isfinite(pixel_aspect) && pixel_aspect >= 0.5 && pixel_aspect <= 2, "pixel-aspect",
+                   "0.5..2 (fy / fx)");
   BTF_CHECK_OPTION(std::isfinite(k1) && std::isfinite(k2) && std::abs(k1) < 1 && std::abs(k2) < 1, "k1/k2",
                    "|k| < 1");
   BTF_CHECK_OPTION(lens == "radtan" || lens == "fisheye", "lens", "radtan or fisheye");
@@ -317,7 +319,8 @@ CameraPose MakeCamera(const PhotoOptions& o, const Board& board, const Vec3& vie
   c.camera.height = o.height;
   const double f = o.focal_px > 0 ? o.focal_px
                                   : 0.9 * 0.5 * std::min(o.width, o.height) * o.camera_distance_mm / PlateHalfSize(board);
-  c.camera.fx = c.camera.fy = f;
+  c.camera.fx = f;
+  c.camera.fy = o.pixel_aspect * f;
   c.camera.cx = 0.5 * (o.width - 1);
   c.camera.cy = 0.5 * (o.height - 1);
   c.camera.model = o.lens;

@@ -49,6 +49,7 @@ struct PhotoOptions {
   int width = 1280, height = 960;
   double camera_distance_mm = 500;
   double focal_px = 0;            // 0 = the plate fills 90 % of the image height at 0 deg
+  double pixel_aspect = 1;        // fy / fx (non-square pixels: fx = focal, fy = pixel_aspect x focal)
   std::string lens = "radtan";    // lens model: "radtan" (k1, k2 below) or "fisheye" (OpenCV cv::fisheye, fisheye_k)
   double k1 = 0, k2 = 0;          // radtan: radial distortion (OpenCV model)
   std::vector<double> fisheye_k = {0, 0, 0, 0};  // fisheye: k1..k4, theta_d = theta (1 + k1 theta^2 + .. + k4 theta^8)

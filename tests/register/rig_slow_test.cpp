@@ -2,7 +2,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <filesystem>
 #include <fstream>
+#include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -55,6 +58,87 @@ TEST(RigAccuracy, AprilGridInSrgbJpegWithBlurNoiseAndDistortionUpTo60Degrees) {
     EXPECT_EQ(j["tags"].size(), t.marker_corners_px.size()) << t.file;  // nothing else decoded
     EXPECT_LE(rms, 0.05) << t.file;
   }
+  }
+}
+
+// Corner RMS of `btf-register detect --json IMAGE --board BOARD EXTRA` against the truth; *found
+// = truth tags detected.
+double DetectedCornerRms(const std::filesystem::path& image, const std::filesystem::path& board, const PhotoTruth& t,
+                         const std::string& extra, int* found) {
+  std::string out;
+  const std::string det =
+      test::Tool("btf-register") + " detect --json " + image.string() + " --board " + board.string() + " " + extra;
+  EXPECT_EQ(test::RunCommand(det, &out), 0) << det << out;
+  const json j = json::parse(out);
+  double ss = 0;
+  int n = 0;
+  *found = 0;
+  for (const auto& d : j["tags"]) {
+    const auto it = t.marker_corners_px.find(d["id"].get<int>());
+    if (it == t.marker_corners_px.end()) continue;
+    ++*found;
+    for (int k = 0; k < 4; ++k) {
+      const Vec2 p(d["corners_px"][k][0].get<double>(), d["corners_px"][k][1].get<double>());
+      ss += (p - it->second[static_cast<std::size_t>(k)]).squaredNorm();
+      ++n;
+    }
+  }
+  return n ? std::sqrt(ss / n) : 1e9;
+}
+
+// One camera effect at a time on a 30 deg AprilGrid photo (640 x 480, f = 800 px, 4 x 4 samples;
+// the base: 8-bit sRGB JPEG quality 90, Gaussian blur 0.7 px, noise 0.5 %, k1 = -0.05), corner
+// RMS against the true projected corners with the default X-junction fit (`--x-corners lines`)
+// and with the edge fit alone (`none`). Bounds: 1.5 x the measured figure (docs/btf-register.md,
+// "Real-rig inputs"), rounded up to 5 thousandths; where the edge fit alone is biased (strong
+// distortion bends the edges, a tone curve the detector does not undo moves every blurred edge)
+// the X-junction fit must also beat it by 2 x.
+TEST(RigAccuracy, AprilGridCornersUnderEachCameraEffect) {
+  struct Effect {
+    const char* name;
+    std::string synth, detect;
+    double bound;
+    int min_found;
+    bool biased;  // the edge fit alone is biased here
+  };
+  const std::string jpeg = " --format jpeg --transfer srgb --jpeg-quality 90";
+  const std::string base = jpeg + " --blur 0.7 --noise 0.005 --k1 -0.05";
+  const std::vector<Effect> effects = {
+      {"base", base, "", 0.035, 36, false},
+      {"vignetting 0.5", base + " --vignetting 0.5", "", 0.04, 36, false},
+      {"pixel aspect 1.1 (fy = 1.1 fx)", base + " --pixel-aspect 1.1", "", 0.04, 35, false},
+      {"radial distortion k1 -0.28 k2 0.07", jpeg + " --blur 0.7 --noise 0.005 --k1 -0.28 --k2 0.07", "", 0.04, 36, true},
+      // Wider blur: fewer tags decode at 640 x 480 (a detection limit, not the fit's).
+      {"blur 1.5 px", jpeg + " --blur 1.5 --noise 0.005 --k1 -0.05", "", 0.045, 20, false},
+      {"noise 2 %", jpeg + " --blur 0.7 --noise 0.02 --k1 -0.05", "", 0.045, 36, false},
+      {"JPEG quality 50", " --format jpeg --transfer srgb --jpeg-quality 50 --blur 0.7 --noise 0.005 --k1 -0.05", "",
+       0.07, 36, false},
+      // A linear sensor's 8-bit values read as sRGB (an untagged grey PNG of a machine-vision camera).
+      {"tone curve (linear values decoded as sRGB)", " --format png8 --transfer linear --blur 0.7 --noise 0.005 --k1 -0.05",
+       "--colorspace srgb", 0.045, 36, true},
+  };
+  for (std::size_t e = 0; e < effects.size(); ++e) {
+    const Effect& f = effects[e];
+    const auto dir = test::TempDir() / ("effect" + std::to_string(e));
+    const std::string synth = test::Tool("btf-synth") +
+                              " photos --quiet --target aprilgrid --views 9 --lights 0 --width 640 --height 480 "
+                              "--focal 800 --camera-distance 300 --pixel-samples 4" +
+                              f.synth + " -o " + dir.string();
+    ASSERT_EQ(test::RunCommand(synth), 0) << synth;
+    const std::vector<PhotoTruth> truth = ReadTruth(dir / "truth.json");
+    ASSERT_EQ(truth.size(), 1u);
+    int found = 0, found_edges = 0;
+    const double rms = DetectedCornerRms(dir / truth[0].file, dir / "board.json", truth[0], f.detect, &found);
+    const double edges =
+        DetectedCornerRms(dir / truth[0].file, dir / "board.json", truth[0], f.detect + " --x-corners none", &found_edges);
+    std::printf("%s: %d of %zu tags, corner RMS %.4f px (edge fit alone %.4f px)\n", f.name, found,
+                truth[0].marker_corners_px.size(), rms, edges);  // docs/btf-register.md
+    EXPECT_GE(found, f.min_found) << f.name;
+    EXPECT_LE(rms, f.bound) << f.name;
+    EXPECT_LT(rms, edges) << f.name;
+    if (f.biased) {
+      EXPECT_LT(2 * rms, edges) << f.name;
+    }
   }
 }
 
@@ -138,7 +222,7 @@ TEST(RigAccuracy, CalibrateFisheyeRecoversTheFisheyeCamera) {
   // The calibration set (15 AprilGrid photos, 640 x 480, f = 500 px, views 0-14 of bonn81,
   // 90 mm away) through a fisheye lens (OpenCV's equidistant model) with k1..k4 = 0.08, -0.02, 0, 0.
   // `calibrate --model fisheye` fits all four coefficients. Bounds: the radtan ones (fx,
-  // fy within 0.2 %, k1 within 2 %, RMS <= 0.1 px); k2..k4 are not bounded one by one: at
+  // fy within 0.2 %, RMS <= 0.1 px; k1 below); k2..k4 are not bounded one by one: at
   // theta <= 0.68 rad (the image corner, atan(400 / 500)) k2 theta^4, k3 theta^6 and k4 theta^8
   // trade off against each other (measured k3 -0.052, k4 0.087 against 0). The lens as a whole is
   // checked instead: the image radius rd(theta) = fx theta_d(theta) of the recovered lens within
@@ -177,11 +261,16 @@ TEST(RigAccuracy, CalibrateFisheyeRecoversTheFisheyeCamera) {
   EXPECT_EQ(j["views_used"], 15);
   EXPECT_LT(std::abs(k.fx / 500 - 1), 0.002);
   EXPECT_LT(std::abs(k.fy / 500 - 1), 0.002);
-  EXPECT_LT(std::abs(k.k1 / 0.08 - 1), 0.02);
+  // k1 trades off against k2..k4 too (measured 0.0854 with the X-junction corner fit, 0.0800 with
+  // the edge fit alone, whose corners are 2 x further from the truth on these photos): bounded at
+  // 10 %, while the lens as a whole is held tighter than before: within 0.4 px (measured 0.23;
+  // 0.30 with the edge fit alone) besides the 0.2 % of the corner radius.
+  EXPECT_LT(std::abs(k.k1 / 0.08 - 1), 0.1);
   EXPECT_LT(worst, 0.002 * rd(m.photos[0].camera, std::atan(0.8)));
+  EXPECT_LT(worst, 0.4);
   EXPECT_LE(c.rms_px, 0.1);
   // For comparison only (printed, no bound): radtan with k1, k2, p1, p2, k3 fits this lens about as
-  // well at this field of view (measured RMS 0.0770 px, as the fisheye fit).
+  // well at this field of view (measured RMS 0.055 px, as the fisheye fit).
   ASSERT_EQ(test::RunCommand(test::Tool("btf-register") + " calibrate --quiet --json " + (dir / "manifest.json").string() +
                                  " --board " + (dir / "board.json").string() + " -o " + (dir / "radtan.json").string(),
                              &out),

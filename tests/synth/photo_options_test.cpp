@@ -31,9 +31,23 @@ TEST(PhotoOptions, NewOptionsAreCheckedByName) {
   bad([](PhotoOptions& o) { o.charuco_square_mm = 10, o.charuco_marker_mm = 10; }, "charuco-marker-mm");
   bad([](PhotoOptions& o) { o.border_bits = 3; }, "border-bits");
   bad([](PhotoOptions& o) { o.grid_spacing = 0; }, "grid-spacing");
+  bad([](PhotoOptions& o) { o.pixel_aspect = 0; }, "pixel-aspect");
   PhotoOptions ok;
   ok.format = "jpeg", ok.transfer = "srgb", ok.blur_px = 0.7, ok.target = "aprilgrid";
   EXPECT_NO_THROW(ok.Check());
+}
+
+TEST(PhotoOptions, PixelAspectGivesNonSquarePixels) {
+  PhotoOptions o;
+  o.target = "aprilgrid", o.width = 640, o.height = 480, o.focal_px = 500, o.pixel_aspect = 1.1;
+  const Board board = MakeBoard(o, 1.0);
+  const CameraPose cam = MakeCamera(o, board, Vec3(0, 0, 1));
+  EXPECT_EQ(cam.camera.fx, 500);
+  EXPECT_NEAR(cam.camera.fy, 550, 1e-12);
+  // A plate point off the axis lands 1.1 x further from the principal point vertically.
+  Vec2 p;
+  ASSERT_TRUE(cam.Project(Vec3(10, 10, 0), &p));
+  EXPECT_NEAR((p.y() - cam.camera.cy) / (p.x() - cam.camera.cx), -1.1, 1e-9);  // image y points down
 }
 
 TEST(PhotoOptions, AprilGridBoardFillsTheImageAtTheGivenFocal) {

@@ -259,6 +259,10 @@ int main(int argc, char** argv) {
   cd->add_flag("--no-refine", df.no_refine, "Skip our sub-pixel edge fit (raw libapriltag corners)");
   cd->add_flag("--no-split-touching", df.no_split,
                "2-bit border: skip the second pass for tags touching an AprilGrid's corner squares");
+  cd->add_option("--x-corners", dopt.x_corners,
+                 "X-junction corners (AprilGrid): lines (edge points on both sides) | cornersubpix | none (edge fit)");
+  cd->add_option("--subpix-window", dopt.subpix_window,
+                 "X-junction cornerSubPix window reach, fraction of the border width (0, 1]");
   add_input_flags(cd, df.input, df.input_gamma);
 
   // calibrate

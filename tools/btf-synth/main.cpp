@@ -183,6 +183,7 @@ int main(int argc, char** argv) {
   cp->add_option("--height", po.height, "Image height, px");
   cp->add_option("--camera-distance", po.camera_distance_mm, "Camera distance from the plate centre, mm");
   cp->add_option("--focal", po.focal_px, "Focal length, px (0 = plate fills 90% of the image at 0 deg)");
+  cp->add_option("--pixel-aspect", po.pixel_aspect, "Non-square pixels: fy / fx (fx = the focal length), 0.5..2");
   cp->add_option("--lens", po.lens, "Lens model: radtan (--k1, --k2) | fisheye (OpenCV cv::fisheye, --fisheye-k)");
   cp->add_option("--k1", po.k1, "Radial distortion k1 (radtan)");
   cp->add_option("--k2", po.k2, "Radial distortion k2 (radtan)");
