@@ -50,6 +50,7 @@ CompressOptions Neural() {
   o.method = CodecMethod::kNeural;
   o.log_epsilon = kEps;
   o.seed = 5;
+  o.neural.latent = 8;
   o.neural.samples = 1 << 16;
   o.neural.batch = 1024;
   o.neural.steps = 1500;
