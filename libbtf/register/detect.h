@@ -60,8 +60,13 @@ struct TagDetection {
 // the black border / quiet zone step is located on normal profiles (the profile's area between
 // the two levels), one total-least-squares line per edge, corners = intersections of adjacent
 // lines. It assumes straight edges (no lens distortion across the tag) and linear intensities (a
-// tone curve moves a blurred edge's 50 % point). Then, with subpix_x_corners, each corner whose
-// outward diagonal is dark (black at half a module, against the border and the two quiet zones
+// tone curve moves a blurred edge's 50 % point). Then each corner whose outward diagonal is dark
+// (an X-junction, below) is refined again. x_corners = "lines" (the default): one line per edge
+// through edge points on both sides of the junction (the tag's side and the corner square's, the
+// dark side swapped) at mirrored distances of 1-2 modules, intersected; three passes, each kept
+// only within one module of the previous corner. The two sides move in opposite directions under
+// a tone curve or blur, so their shifts cancel, and the fit is local, so lens distortion barely
+// bends it. x_corners = "cornersubpix": each corner whose outward diagonal is dark (black at half a module, against the border and the two quiet zones
 // beside it: an X-junction) is refined by cv::cornerSubPix on the linear gray image (100
 // iterations / 1e-4 px) in a square window of half-size subpix_window x border_bits x the
 // smaller module length at that corner / sqrt 2 (at least 2 px): the window stays in the black

@@ -2,10 +2,13 @@
 
 #include <cmath>
 #include <cstdio>
+#include <limits>
+#include <string>
 
 #include "libbtf/core/error.h"
 #include "libbtf/register/detect.h"
 #include "tests/register/render_util.h"
+#include "tests/test_util.h"
 
 namespace btf {
 namespace {
@@ -118,6 +121,15 @@ TEST(Detect, BadOptionsAndFamiliesAreUsageErrors) {
   o = {};
   o.family = "aruco:DICT_9X9_1";
   EXPECT_THROW(o.Check(), Error);
+  // The X-junction refinement's fields, each named in the message.
+  o = {};
+  o.x_corners = "subpix";
+  EXPECT_NE(test::ErrorOf([&] { o.Check(); }).find("x_corners"), std::string::npos);
+  o = {};
+  o.subpix_window = 0;
+  EXPECT_NE(test::ErrorOf([&] { o.Check(); }).find("subpix_window"), std::string::npos);
+  o.subpix_window = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_NE(test::ErrorOf([&] { o.Check(); }).find("subpix_window"), std::string::npos);
 }
 
 TEST(Detect, GrayIsLinearAndScaledToThe995thPercentile) {
