@@ -4,6 +4,8 @@
 #include <functional>
 #include <string>
 
+#include <gtest/gtest.h>
+
 #include "libbtf/core/dataset.h"
 #include "libbtf/core/error.h"
 
@@ -32,6 +34,14 @@ inline std::string ErrorOf(const std::function<void()>& f, ExitCode* code = null
     return e.what();
   }
   return "";
+}
+
+// The message of the bad-input error f throws; a test failure when f throws none or another kind.
+inline std::string BadInputOf(const std::function<void()>& f) {
+  ExitCode code = ExitCode::kOk;
+  const std::string message = ErrorOf(f, &code);
+  EXPECT_EQ(code, ExitCode::kBadInput) << (message.empty() ? "no error" : message);
+  return message;
 }
 
 // A small deterministic dataset with distinct values per (v, l, y, x, c).

@@ -83,18 +83,6 @@ struct BtflibBdi {
   }
 };
 
-template <typename F>
-std::string BadInput(F f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    EXPECT_EQ(e.code(), ExitCode::kBadInput) << e.what();
-    return e.what();
-  }
-  ADD_FAILURE() << "no error";
-  return "";
-}
-
 // The file: 8 x 6 texels, 4 scan lines a chunk: chunk 1 holds 16 ABRDFs padded to 32.
 TEST(BonnBtflib, PaddedLastChunkIsReadForFullAndSparseMasks) {
   const auto dir = test::TempDir();
@@ -149,7 +137,7 @@ TEST(BonnBtflib, ALastChunkOfAnyOtherSizeIsRefusedNamingBothForms) {
     std::memcpy(g.b.data() + chunk1_at, &bytes, 4);
     g.b.resize(chunk1_at + 4 + bytes);  // the data fits the claim: only the size is wrong
     g.Save(dir / "bad.btf");
-    const std::string what = BadInput([&] { (void)BonnReader(dir / "bad.btf"); });
+    const std::string what = test::BadInputOf([&] { (void)BonnReader(dir / "bad.btf"); });
     EXPECT_NE(what.find("bad.btf"), std::string::npos) << what;
     EXPECT_NE(what.find(fmt::format("chunk 1 byte_size at byte {}", chunk1_at)), std::string::npos) << what;
     EXPECT_NE(what.find(fmt::format("expected 16 ABRDFs x {} bytes", b.abrdf() * 2)), std::string::npos) << what;
@@ -162,7 +150,7 @@ TEST(BonnBtflib, ALastChunkOfAnyOtherSizeIsRefusedNamingBothForms) {
   const auto bytes = std::uint32_t(16 * b.abrdf() * 2);
   std::memcpy(g.b.data() + chunk0_at, &bytes, 4);
   g.Save(dir / "bad.btf");
-  const std::string what = BadInput([&] { (void)BonnReader(dir / "bad.btf"); });
+  const std::string what = test::BadInputOf([&] { (void)BonnReader(dir / "bad.btf"); });
   EXPECT_NE(what.find("chunk 0 byte_size"), std::string::npos) << what;
   EXPECT_EQ(what.find("padded"), std::string::npos) << what;
   // A padded file cut anywhere is refused.
@@ -170,7 +158,7 @@ TEST(BonnBtflib, ALastChunkOfAnyOtherSizeIsRefusedNamingBothForms) {
     Bytes cut;
     cut.b.assign(f.b.begin(), f.b.begin() + std::ptrdiff_t(n));
     cut.Save(dir / "cut.btf");
-    EXPECT_NE(BadInput([&] { (void)BonnReader(dir / "cut.btf"); }).find("cut.btf"), std::string::npos);
+    EXPECT_NE(test::BadInputOf([&] { (void)BonnReader(dir / "cut.btf"); }).find("cut.btf"), std::string::npos);
   }
 }
 
@@ -194,7 +182,7 @@ TEST(BonnBtflib, ClaimedSizesAreCheckedAgainstTheFileBeforeAllocating) {
     for (int i = 0; i < 16; ++i) f.U8(1);
     f.Save(dir / "claims.btf");
     const double before = PeakRssBytes();
-    const std::string what = BadInput([&] { (void)DescribeBonnFile(dir / "claims.btf", false); });
+    const std::string what = test::BadInputOf([&] { (void)DescribeBonnFile(dir / "claims.btf", false); });
     EXPECT_LT(PeakRssBytes() - before, 64.0 * (1 << 20));
     EXPECT_NE(what.find("claims.btf"), std::string::npos) << what;
     EXPECT_NE(what.find("mask of 32768 x 32768 texels"), std::string::npos) << what;
@@ -207,7 +195,7 @@ TEST(BonnBtflib, ClaimedSizesAreCheckedAgainstTheFileBeforeAllocating) {
   for (int i = 0; i < 2048 * 2048; ++i) f.U8(i % 2);
   f.U32(0);
   f.Save(dir / "nochunks.btf");
-  const std::string what = BadInput([&] { (void)BonnReader(dir / "nochunks.btf"); });
+  const std::string what = test::BadInputOf([&] { (void)BonnReader(dir / "nochunks.btf"); });
   EXPECT_NE(what.find("256 chunks of 2097152 stored ABRDFs x 6 bytes"), std::string::npos) << what;
 }
 

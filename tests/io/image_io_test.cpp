@@ -136,18 +136,6 @@ double PeakRssBytes() {
   return double(u.ru_maxrss) * 1024;
 }
 
-template <typename F>
-std::string BadInput(F f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    EXPECT_EQ(e.code(), ExitCode::kBadInput) << e.what();
-    return e.what();
-  }
-  ADD_FAILURE() << "no error";
-  return "";
-}
-
 // A few bytes can claim gigapixels (a 30000 x 30000 RGB image as float: 10 GB): the header's size
 // is checked against max_pixels before any pixel is allocated or read, and the message says what
 // to pass.
@@ -157,19 +145,19 @@ TEST(ImageIo, HeaderClaimingMorePixelsThanTheLimitIsRefusedBeforeReading) {
   ASSERT_EQ(png.size(), 69u);
   std::ofstream(dir / "huge.png", std::ios::binary) << png;
   const double before = PeakRssBytes();
-  std::string what = BadInput([&] { ReadImage(dir / "huge.png"); });
+  std::string what = test::BadInputOf([&] { ReadImage(dir / "huge.png"); });
   EXPECT_LT(PeakRssBytes() - before, 64.0 * (1 << 20));
   for (const char* part : {"huge.png", "30000 x 30000 = 900000000 pixels", "over the limit of 134217728",
                            "pass --max-pixels 900000000"})
     EXPECT_NE(what.find(part), std::string::npos) << what << " / " << part;
   // From memory (an entry of a zip archive) the same.
-  what = BadInput([&] { DecodeImage("set.zip:huge.png", png); });
+  what = test::BadInputOf([&] { DecodeImage("set.zip:huge.png", png); });
   EXPECT_NE(what.find("set.zip:huge.png"), std::string::npos) << what;
   // Raised above the claim, the file is read, and found to be short: still bad input, no crash.
   ImageReadOptions small;
   small.max_pixels = 1000;
   std::ofstream(dir / "short.png", std::ios::binary) << ClaimingPng(30, 30);
-  what = BadInput([&] { ReadImage(dir / "short.png", small); });
+  what = test::BadInputOf([&] { ReadImage(dir / "short.png", small); });
   EXPECT_EQ(what.find("--max-pixels"), std::string::npos) << what;
 }
 
@@ -180,7 +168,7 @@ TEST(ImageIo, MaxPixelsIsInclusiveAndZeroMeansNoLimit) {
   o.max_pixels = 64 * 48;
   EXPECT_EQ(ReadImage(dir / "r.png", o).width, 64);
   o.max_pixels = 64 * 48 - 1;
-  EXPECT_NE(BadInput([&] { ReadImage(dir / "r.png", o); }).find("pass --max-pixels 3072"), std::string::npos);
+  EXPECT_NE(test::BadInputOf([&] { ReadImage(dir / "r.png", o); }).find("pass --max-pixels 3072"), std::string::npos);
   o.max_pixels = 0;
   EXPECT_EQ(ReadImage(dir / "r.png", o).height, 48);
   EXPECT_EQ(ImageReadOptions().max_pixels, std::uint64_t(1) << 27);
