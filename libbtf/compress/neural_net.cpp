@@ -181,21 +181,26 @@ template <typename Scalar>
 const typename BasicNeuralNet<Scalar>::Matrix& BasicNeuralNet<Scalar>::Forward(const Eigen::Ref<const Matrix>& X,
                                                                                Workspace& ws) const {
   BTF_CHECK(X.rows() == shape_.inputs);
-  Matrix z0;
-  z0.noalias() = weight(0) * X;
-  z0.colwise() += bias(0);
-  return ForwardFromFirstLayer(std::move(z0), ws);
+  ws.z.resize(layers());
+  ws.z[0].noalias() = weight(0) * X;
+  ws.z[0].colwise() += bias(0);
+  return ForwardFromWorkspace(ws);
 }
 
 template <typename Scalar>
 const typename BasicNeuralNet<Scalar>::Matrix& BasicNeuralNet<Scalar>::ForwardFromFirstLayer(Matrix&& z0,
                                                                                              Workspace& ws) const {
   BTF_CHECK(z0.rows() == weight(0).rows());
+  ws.z.resize(layers());
+  ws.z[0].swap(z0);
+  return ForwardFromWorkspace(ws);
+}
+
+template <typename Scalar>
+const typename BasicNeuralNet<Scalar>::Matrix& BasicNeuralNet<Scalar>::ForwardFromWorkspace(Workspace& ws) const {
   const int L = layers();
-  ws.z.resize(L);
   ws.a.resize(L);
   ws.sig.resize(L);
-  ws.z[0].swap(z0);
   for (int l = 0; l < L; ++l) {
     Matrix& z = ws.z[l];
     if (l > 0) {

@@ -99,6 +99,9 @@ class BasicNeuralNet {
                 Matrix* dX) const;
 
  private:
+  // The layers from ws.z[0] (layer 0's pre-activation) on.
+  const Matrix& ForwardFromWorkspace(Workspace& ws) const;
+
   NeuralNetShape shape_;
   std::vector<Scalar> params_;
   std::vector<Eigen::Index> offsets_;  // per layer, start of W_l

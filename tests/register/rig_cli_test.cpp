@@ -16,6 +16,7 @@
 #include "libbtf/io/rig.h"
 #include "libbtf/register/calibrate.h"
 #include "libbtf/register/detect.h"
+#include "tests/register/corner_rms.h"
 #include "tests/test_util.h"
 
 namespace btf {
@@ -23,23 +24,7 @@ namespace {
 
 using json = nlohmann::json;
 
-// Corner RMS of `detect --json` output against truth.json's corners of the same photo.
-double CornerRms(const json& det, const PhotoTruth& truth, int* found) {
-  double ss = 0;
-  int n = 0;
-  *found = 0;
-  for (const auto& t : det["tags"]) {
-    const auto it = truth.marker_corners_px.find(t["id"].get<int>());
-    if (it == truth.marker_corners_px.end()) continue;
-    ++*found;
-    for (int k = 0; k < 4; ++k) {
-      const Vec2 p(t["corners_px"][k][0].get<double>(), t["corners_px"][k][1].get<double>());
-      ss += (p - it->second[static_cast<std::size_t>(k)]).squaredNorm();
-      ++n;
-    }
-  }
-  return n ? std::sqrt(ss / n) : 1e9;
-}
+using test::CornerRms;
 
 TEST(RigCli, AprilGridWithTwoBitBorderInSrgbJpegIsFoundWithBoardCoordinates) {
   // 30 deg view of a 6 x 6 AprilGrid, 640 x 480, 8-bit sRGB JPEG quality 90, blur 0.7 px, noise

@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "libbtf/io/rig.h"
+#include "tests/register/corner_rms.h"
 #include "tests/test_util.h"
 
 namespace btf {
@@ -69,21 +70,7 @@ double DetectedCornerRms(const std::filesystem::path& image, const std::filesyst
   const std::string det =
       test::Tool("btf-register") + " detect --json " + image.string() + " --board " + board.string() + " " + extra;
   EXPECT_EQ(test::RunCommand(det, &out), 0) << det << out;
-  const json j = json::parse(out);
-  double ss = 0;
-  int n = 0;
-  *found = 0;
-  for (const auto& d : j["tags"]) {
-    const auto it = t.marker_corners_px.find(d["id"].get<int>());
-    if (it == t.marker_corners_px.end()) continue;
-    ++*found;
-    for (int k = 0; k < 4; ++k) {
-      const Vec2 p(d["corners_px"][k][0].get<double>(), d["corners_px"][k][1].get<double>());
-      ss += (p - it->second[static_cast<std::size_t>(k)]).squaredNorm();
-      ++n;
-    }
-  }
-  return n ? std::sqrt(ss / n) : 1e9;
+  return test::CornerRms(json::parse(out), t, found);
 }
 
 // One camera effect at a time on a 30 deg AprilGrid photo (640 x 480, f = 800 px, 4 x 4 samples;
