@@ -58,7 +58,10 @@ void NeuralCodecModel::DecodeImages(Eigen::Index n, const float* wi, const float
   const Eigen::Index T = texels();
   const int E = encoding.Width(), C = channels();
   const auto W0 = net.weight(0);
-  const Eigen::Index H = W0.rows(), per_pair = (T + kNeuralChunk - 1) / kNeuralChunk;
+  // Columns per work item: 256 keeps a hidden layer's activations (H x 256 floats, 32 KB at H = 32)
+  // in the L1/L2 caches between the layers' products.
+  constexpr Eigen::Index kChunk = 256;
+  const Eigen::Index H = W0.rows(), per_pair = (T + kChunk - 1) / kChunk;
   // Layer 0 is W_0 [z; e] + b_0 = W_z z + (W_e e + b_0): the latent part once per texel (P), the
   // direction part once per pair. Both loops hand out the same chunks for any thread count, and
   // Eigen runs each product on its thread alone inside the parallel region.
@@ -67,7 +70,7 @@ void NeuralCodecModel::DecodeImages(Eigen::Index n, const float* wi, const float
   {
 #pragma omp for schedule(static)
     for (Eigen::Index c = 0; c < per_pair; ++c) {
-      const Eigen::Index begin = c * kNeuralChunk, count = std::min(kNeuralChunk, T - begin);
+      const Eigen::Index begin = c * kChunk, count = std::min(kChunk, T - begin);
       P.middleCols(begin, count).noalias() = W0.leftCols(latent) * latents.middleCols(begin, count);
     }
     NeuralNet::Workspace ws;
@@ -75,8 +78,7 @@ void NeuralCodecModel::DecodeImages(Eigen::Index n, const float* wi, const float
     Eigen::VectorXf e(E), d(H);
 #pragma omp for schedule(static)
     for (Eigen::Index k = 0; k < n * per_pair; ++k) {
-      const Eigen::Index pair = k / per_pair, begin = (k % per_pair) * kNeuralChunk,
-                         count = std::min(kNeuralChunk, T - begin);
+      const Eigen::Index pair = k / per_pair, begin = (k % per_pair) * kChunk, count = std::min(kChunk, T - begin);
       EncodeDirections(encoding, wi + 3 * pair, wo + 3 * pair, e.data());
       d.noalias() = W0.rightCols(E) * e;
       d += net.bias(0);

@@ -64,7 +64,12 @@ void Activate(Activation act, const S* __restrict z, S* __restrict a, S* __restr
     case Activation::kSoftplus: am = zm.max(S(0)) + (-zm.abs()).exp().log1p(); break;
     // z sigmoid(z) with sigmoid = 1 / (1 + exp(-z)): exp overflows to inf for z < -88 (float),
     // giving sigmoid 0 and z * 0 = -0, the limit.
+    // Without sig (inference: nothing to keep for a backward pass) the same expression, one pass.
     case Activation::kSilu: {
+      if (sig == nullptr) {
+        am = zm * (S(1) / (S(1) + (-zm).exp()));
+        break;
+      }
       Eigen::Map<Array> sm(sig, n);
       sm = S(1) / (S(1) + (-zm).exp());
       am = zm * sm;
@@ -193,11 +198,12 @@ const typename BasicNeuralNet<Scalar>::Matrix& BasicNeuralNet<Scalar>::ForwardFr
   BTF_CHECK(z0.rows() == weight(0).rows());
   ws.z.resize(layers());
   ws.z[0].swap(z0);
-  return ForwardFromWorkspace(ws);
+  return ForwardFromWorkspace(ws, /*for_backward=*/false);
 }
 
 template <typename Scalar>
-const typename BasicNeuralNet<Scalar>::Matrix& BasicNeuralNet<Scalar>::ForwardFromWorkspace(Workspace& ws) const {
+const typename BasicNeuralNet<Scalar>::Matrix& BasicNeuralNet<Scalar>::ForwardFromWorkspace(Workspace& ws,
+                                                                                            bool for_backward) const {
   const int L = layers();
   ws.a.resize(L);
   ws.sig.resize(L);
@@ -210,7 +216,7 @@ const typename BasicNeuralNet<Scalar>::Matrix& BasicNeuralNet<Scalar>::ForwardFr
     if (l + 1 < L) {
       ws.a[l].resize(z.rows(), z.cols());
       Scalar* sig = nullptr;
-      if (shape_.activation == Activation::kSilu) {
+      if (for_backward && shape_.activation == Activation::kSilu) {
         ws.sig[l].resize(z.rows(), z.cols());
         sig = ws.sig[l].data();
       }

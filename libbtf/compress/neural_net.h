@@ -91,7 +91,8 @@ class BasicNeuralNet {
   const Matrix& Forward(const Eigen::Ref<const Matrix>& X, Workspace& ws) const;
   // The same from layer 0's pre-activation z0 = W_0 X + b_0 (first layer's outputs x batch; taken
   // over by ws), for a caller that computes the first layer in parts: decoding many direction
-  // pairs for the same latents computes W_0's latent columns once per texel.
+  // pairs for the same latents computes W_0's latent columns once per texel. Inference only: ws
+  // then holds nothing for Backward.
   const Matrix& ForwardFromFirstLayer(Matrix&& z0, Workspace& ws) const;
   // After Forward(X, ws): dY (outputs x batch) is d(loss)/d(output). Adds d(loss)/d(parameters)
   // to grad (parameter_count() values); writes d(loss)/dX (inputs x batch) to dX unless null.
@@ -99,8 +100,8 @@ class BasicNeuralNet {
                 Matrix* dX) const;
 
  private:
-  // The layers from ws.z[0] (layer 0's pre-activation) on.
-  const Matrix& ForwardFromWorkspace(Workspace& ws) const;
+  // The layers from ws.z[0] (layer 0's pre-activation) on; for_backward: keep what Backward needs.
+  const Matrix& ForwardFromWorkspace(Workspace& ws, bool for_backward = true) const;
 
   NeuralNetShape shape_;
   std::vector<Scalar> params_;
