@@ -41,14 +41,43 @@ ROUNDS = 2
 
 
 def blas_kernel():
-    """The BLAS NumPy runs, in words (threadpoolctl; Debian python3-threadpoolctl)."""
+    """The BLAS NumPy runs, in words (threadpoolctl; Debian python3-threadpoolctl), and whether it
+    is an optimised one (OpenBLAS, BLIS or MKL; Debian's reference libblas3 is not)."""
     try:
         from threadpoolctl import threadpool_info
     except ImportError:
-        return "unknown (threadpoolctl missing: Debian python3-threadpoolctl)"
+        return "unknown (threadpoolctl missing: Debian python3-threadpoolctl)", False
     blas = [i for i in threadpool_info() if i.get("user_api") == "blas"]
-    return "; ".join(f"{i.get('internal_api')} {i.get('version')} kernel {i.get('architecture')} "
-                     f"threads {i.get('num_threads')}" for i in blas) or "none found"
+    words = "; ".join(f"{i.get('internal_api')} {i.get('version')} kernel {i.get('architecture')} "
+                      f"threads {i.get('num_threads')}" for i in blas)
+    if not words:  # threadpoolctl knows only the optimised libraries by name
+        return "none that threadpoolctl knows: the reference BLAS (Debian: install libopenblas0-pthread)", False
+    return words, True
+
+
+def numpy_gemm_rate(n=1024, seconds=2.0):
+    """NumPy's float32 n x n x n GEMM rate in GFLOP/s (its BLAS, all its threads), best of the reps."""
+    a = np.random.default_rng(1).standard_normal((n, n), dtype=np.float32)
+    b = np.random.default_rng(2).standard_normal((n, n), dtype=np.float32)
+    a @ b  # warm-up: thread pool start, page faults
+    best, start = float("inf"), time.perf_counter()
+    while time.perf_counter() - start < seconds:
+        t = time.perf_counter()
+        a @ b
+        best = min(best, time.perf_counter() - t)
+    return 2.0 * n ** 3 / best / 1e9
+
+
+def our_gemm_rate(build):
+    """Eigen's float32 1024^3 GEMM rate in GFLOP/s on both threads (bench_compress BM_EigenGemm), or None."""
+    exe = os.path.join(build, "bin", "bench_compress")
+    if not os.path.exists(exe):
+        return None
+    out = subprocess.run([exe, "--benchmark_filter=BM_EigenGemm<float>", "--benchmark_format=json"],
+                         capture_output=True, text=True, check=True).stdout
+    import json
+    rates = [b["GFLOPs"] for b in json.loads(out)["benchmarks"] if "GFLOPs" in b]
+    return rates[0] if rates else None
 
 
 def main():
@@ -117,8 +146,15 @@ def main():
                  theirs_s, np.sqrt(err / total)))
 
     unset = os.environ.get("BTF_VS_NUMPY_UNSET")
-    print(f"numpy {np.__version__}, BLAS: {blas_kernel()}"
+    kernel, optimised = blas_kernel()
+    print(f"numpy {np.__version__}, BLAS: {kernel}"
           f"{f' (unset for the peer: {unset})' if unset else ''}")
+    if not optimised:
+        print("WARNING: the peer runs an unoptimised BLAS, so the ratios below flatter ours")
+    ours_gemm = our_gemm_rate(build)
+    print(f"float32 GEMM 1024^3, both cores: NumPy {numpy_gemm_rate():.1f} GFLOP/s"
+          f"{f', ours (Eigen, bench_compress BM_EigenGemm) {ours_gemm:.1f} GFLOP/s' if ours_gemm else ''}; "
+          f"load average {os.getloadavg()[0]:.2f}")
     print(f"input {path}: {V} x {L} directions, {H} x {W} texels, {C} channels")
     print(f"{'codec':<20} {'theirs':<36} {'ours s':>8} {'ours err':>9} {'theirs s':>9} {'their err':>9} {'speed-up':>8}")
     for name, how, os_, oe, ts, te in rows:
