@@ -27,6 +27,8 @@
 
 namespace btf {
 
+const char* ViewerSourceDir();  // viewer_source_dir.cpp
+
 namespace {
 
 // Owns the reference decoder of one layout.
@@ -272,7 +274,7 @@ std::filesystem::path ViewerDir(const BrowserOptions& b, bool need_playwright) {
   std::filesystem::path dir = b.viewer_dir;
   if (dir.empty()) {
     const char* env = std::getenv("BTF_VIEWER_DIR");
-    dir = env && *env ? std::filesystem::path(env) : std::filesystem::path(BTF_VIEWER_SOURCE_DIR);
+    dir = env && *env ? std::filesystem::path(env) : std::filesystem::path(ViewerSourceDir());
   }
   if (!std::filesystem::exists(dir / "index.html")) ThrowUsage("'{}' is not the libbtf viewer folder (no index.html)", dir.string());
   for (const char* m : {"three", "playwright-core"}) {
