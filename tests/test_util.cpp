@@ -1,5 +1,7 @@
 #include "tests/test_util.h"
 
+#include "tests/fault_shim.h"
+
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -40,6 +42,8 @@ int RunCommand(const std::string& command, std::string* out) {
 std::string Tool(const std::string& name) { return std::string(BTF_TOOLS_DIR) + "/" + name; }
 
 std::string SourceDir() { return BTF_SOURCE_DIR; }
+
+std::string FaultShim() { return BTF_FAULT_SHIM; }
 
 Dataset MakeTestDataset(int views, int lights, int height, int width, int channels) {
   const Sampling all = Sampling::Bonn81();

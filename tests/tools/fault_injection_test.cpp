@@ -15,6 +15,7 @@
 
 #include <fmt/format.h>
 
+#include "tests/fault_shim.h"
 #include "tests/test_util.h"
 
 namespace btf {
@@ -93,7 +94,7 @@ TEST_P(FaultInjection, EveryFaultExitsFourAndKeepsTheOldOutput) {
   ASSERT_EQ(test::RunCommand(command + " 2>&1"), 0) << command;
   const std::string env = fmt::format(
       "ASAN_OPTIONS=detect_leaks=1:verify_asan_link_order=0 LD_PRELOAD={} BTF_FAULT_DIR={} BTF_FAULT_COUNTS={} ",
-      BTF_FAULT_SHIM, dir.string(), (dir / "counts").string());
+      test::FaultShim(), dir.string(), (dir / "counts").string());
   std::string log;
   ASSERT_EQ(test::RunCommand(env + command + " 2>&1", &log), 0) << command << "\n" << log;
   const Counts total = ReadCounts(dir / "counts");

@@ -16,6 +16,7 @@
 #include <nlohmann/json.hpp>
 
 #include "libbtf/io/dataset_io.h"
+#include "tests/fault_shim.h"
 #include "tests/test_util.h"
 
 namespace btf {
@@ -107,7 +108,7 @@ TEST(Faults, InputChangedWhileReadGivesTheOriginalResultOrAClearError) {
                              " --method pca-view --components 2 --quiet -o " + ref_other.string()),
             0);
   const std::string env = fmt::format("LD_PRELOAD={} ASAN_OPTIONS=detect_leaks=1:verify_asan_link_order=0 BTF_FAULT_DIR={} ",
-                                      BTF_FAULT_SHIM, in.string());
+                                      test::FaultShim(), in.string());
   ASSERT_EQ(test::RunCommand(env + "BTF_FAULT_COUNTS=" + (dir / "counts").string() + " " + compress + codec.string()), 0);
   std::ifstream counts(dir / "counts");
   std::string op;
