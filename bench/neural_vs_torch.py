@@ -16,8 +16,8 @@ of Linear/SiLU layers (torch.optim.Adam), the mean squared error, on random samp
 shapes; timed over STEPS steps after WARMUP, with torch.set_num_threads(1) and (2).
 
 Both print milliseconds per step (wall); the ratio is torch's time over ours. Torch's BLAS and
-threading are printed with the table. OPENBLAS_CORETYPE / OPENBLAS_L2_SIZE are unset for the whole
-run (they slow a current OpenBLAS, which torch may use). Needs python3-torch (`./run bench`
+threading and the BLAS loaded are printed with the table; OPENBLAS_CORETYPE / OPENBLAS_L2_SIZE are
+unset for the whole run (bench/peer_env.py). Needs python3-torch (`./run bench`
 installs it).
 """
 import json
@@ -26,10 +26,9 @@ import subprocess
 import sys
 import time
 
-_SLOWING = ("OPENBLAS_CORETYPE", "OPENBLAS_L2_SIZE")
-if any(v in os.environ for v in _SLOWING):
-    _env = {k: v for k, v in os.environ.items() if k not in _SLOWING}
-    os.execve(sys.executable, [sys.executable, *sys.argv], _env)
+from peer_env import blas_kernel, fair_environment  # bench/peer_env.py
+
+UNSET = fair_environment()  # before torch loads its BLAS
 
 BATCH, TEXELS, LATENT, DIRS, HIDDEN, OUT = 4096, 256, 8, 6, 32, 3
 WARMUP, STEPS = 20, 300
@@ -93,6 +92,10 @@ def main():
     keys = ("BLAS_INFO", "USE_MKLDNN", "USE_OPENMP", "PERF_WITH_AVX2")
     found = {k: m.group(1) for k in keys if (m := re.search(rf"{k}=([^,\s]+)", config))}
     print("torch build: " + ", ".join(f"{k}={v}" for k, v in found.items()))
+    kernel, optimised = blas_kernel()
+    print(f"BLAS loaded: {kernel}{f' (unset for the peer: {UNSET})' if UNSET else ''}")
+    if not optimised:
+        print("WARNING: torch runs an unoptimised BLAS, so the ratios below flatter ours")
     print(f"training step, batch {BATCH}, {LATENT + DIRS}-{HIDDEN}-{HIDDEN}-{OUT} SiLU, Adam "
           f"(latents: lazy / SparseAdam), {TEXELS} texels; ms per step (wall)")
     print(f"{'threads':>7} {'libbtf':>9} {'torch':>9} {'torch / libbtf':>15}")

@@ -17,10 +17,11 @@ already in memory (the read is not counted for them):
 Errors are relative L2 over the whole BTF, ||X - X'||_F / ||X||_F, the definition our summary uses.
 Both sides use both cores (OpenMP for ours, OpenBLAS threads for NumPy). Prints one table.
 
-A fair peer: OPENBLAS_CORETYPE and OPENBLAS_L2_SIZE, set on some machines for old OpenBLAS builds,
-force a current OpenBLAS onto an older kernel and slow NumPy. The script re-executes itself
-without them before NumPy loads (ours does not use OpenBLAS), and prints the BLAS NumPy runs
-(threadpoolctl: library, version, kernel architecture, threads) with the table.
+A fair peer (bench/peer_env.py): the script re-executes itself without OPENBLAS_CORETYPE and
+OPENBLAS_L2_SIZE before NumPy loads, prints the BLAS NumPy runs (threadpoolctl: library, version,
+kernel architecture, threads) with the table, and warns when it is Debian's reference BLAS
+(install libopenblas0-pthread; ./run bench does). It also prints NumPy's and Eigen's float32 GEMM
+rates, measured in the same run.
 """
 import os
 import subprocess
@@ -28,31 +29,12 @@ import sys
 import tempfile
 import time
 
-# Before NumPy loads OpenBLAS: a peer slowed by these variables is no peer.
-_SLOWING = ("OPENBLAS_CORETYPE", "OPENBLAS_L2_SIZE")
-if any(v in os.environ for v in _SLOWING):
-    _env = {k: v for k, v in os.environ.items() if k not in _SLOWING}
-    _env["BTF_VS_NUMPY_UNSET"] = ",".join(f"{v}={os.environ[v]}" for v in _SLOWING if v in os.environ)
-    os.execve(sys.executable, [sys.executable, *sys.argv], _env)
+from peer_env import blas_kernel, fair_environment  # noqa: E402  (bench/peer_env.py)
 
+UNSET = fair_environment()  # before NumPy loads its BLAS: a peer slowed by these variables is no peer
 import numpy as np  # noqa: E402
 
 ROUNDS = 2
-
-
-def blas_kernel():
-    """The BLAS NumPy runs, in words (threadpoolctl; Debian python3-threadpoolctl), and whether it
-    is an optimised one (OpenBLAS, BLIS or MKL; Debian's reference libblas3 is not)."""
-    try:
-        from threadpoolctl import threadpool_info
-    except ImportError:
-        return "unknown (threadpoolctl missing: Debian python3-threadpoolctl)", False
-    blas = [i for i in threadpool_info() if i.get("user_api") == "blas"]
-    words = "; ".join(f"{i.get('internal_api')} {i.get('version')} kernel {i.get('architecture')} "
-                      f"threads {i.get('num_threads')}" for i in blas)
-    if not words:  # threadpoolctl knows only the optimised libraries by name
-        return "none that threadpoolctl knows: the reference BLAS (Debian: install libopenblas0-pthread)", False
-    return words, True
 
 
 def numpy_gemm_rate(n=1024, seconds=2.0):
@@ -145,10 +127,8 @@ def main():
     rows.append(("LPCA k=32 c=8", f"sklearn KMeans + {ROUNDS} local-PCA rounds", ours_s, ours["relative_error"],
                  theirs_s, np.sqrt(err / total)))
 
-    unset = os.environ.get("BTF_VS_NUMPY_UNSET")
     kernel, optimised = blas_kernel()
-    print(f"numpy {np.__version__}, BLAS: {kernel}"
-          f"{f' (unset for the peer: {unset})' if unset else ''}")
+    print(f"numpy {np.__version__}, BLAS: {kernel}{f' (unset for the peer: {UNSET})' if UNSET else ''}")
     if not optimised:
         print("WARNING: the peer runs an unoptimised BLAS, so the ratios below flatter ours")
     ours_gemm = our_gemm_rate(build)
