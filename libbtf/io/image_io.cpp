@@ -1,8 +1,5 @@
 #include "libbtf/io/image_io.h"
 
-#include <OpenImageIO/filesystem.h>
-#include <OpenImageIO/imageio.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -12,6 +9,7 @@
 #include "libbtf/core/atomic_file.h"
 #include "libbtf/core/dataset.h"
 #include "libbtf/core/error.h"
+#include "libbtf/io/image_plugin.h"
 
 namespace btf {
 
@@ -92,32 +90,27 @@ namespace {
 Image Decode(const std::string& name, const std::string& bytes, const ImageReadOptions& options,
              const std::filesystem::path* file) {
   CheckExrHeader(name, bytes);
-  // Measurement data: a 4th channel is data, never premultiplied alpha to be (un)associated.
-  OIIO::ImageSpec config;
-  config.attribute("oiio:UnassociatedAlpha", 1);
-  OIIO::Filesystem::IOMemReader proxy(bytes.data(), bytes.size());
-  OIIO::ImageSpec proxy_config = config;  // OpenImageIO 2.4 readers take the proxy from the config at open
-  void* proxy_ptr = &proxy;
-  proxy_config.attribute("oiio:ioproxy", OIIO::TypeDesc::PTR, &proxy_ptr);
-  // The reader is chosen by the extension and given the bytes; OpenImageIO 2.4's open(name, ...)
-  // would read the file again from disk. Formats without I/O proxies, or unknown extensions, are
-  // opened from the file.
+  const ImagePlugin& plugin = LoadImagePlugin();
+  // The reader is chosen by the extension and given the bytes. Formats without I/O proxies, or
+  // unknown extensions, are opened from the file.
   const std::string ext = Lower(std::filesystem::path(name).extension().string());
   const std::string format = ext.empty() ? ext : ext.substr(1);
-  auto in = format.empty() ? nullptr : OIIO::ImageInput::create(format, false, &proxy_config, &proxy);
-  OIIO::ImageSpec opened;
-  if (in && in->supports("ioproxy")) {
-    if (!in->open(name, opened, proxy_config)) ThrowBadInput("cannot read image '{}': {}", name, in->geterror());
-  } else if (file) {
-    in = OIIO::ImageInput::open(file->string(), &config);
-    if (!in) ThrowBadInput("cannot read image '{}': {}", name, OIIO::geterror());
-  } else {
+  std::unique_ptr<ImageReader> in;
+  std::string error;
+  const PluginStatus status =
+      format.empty() ? PluginStatus::kUnsupported : plugin.OpenMemory(format, name, bytes, &in, &error);
+  if (status == PluginStatus::kFailed) {
+    ThrowBadInput("cannot read image '{}': {}", name, error);
+  } else if (status == PluginStatus::kUnsupported && file) {
+    in = plugin.OpenFile(file->string(), &error);
+    if (!in) ThrowBadInput("cannot read image '{}': {}", name, error);
+  } else if (status == PluginStatus::kUnsupported) {
     ThrowBadInput("cannot read image '{}': its format{} cannot be decoded from memory (only from a file): unpack it",
                   name, format.empty() ? "" : " '" + format + "'");
   }
-  const OIIO::ImageSpec& spec = in->spec();
-  if (spec.width < 1 || spec.height < 1 || spec.nchannels < 1)
-    ThrowBadInput("image '{}' has an invalid size {}x{}x{}", name, spec.width, spec.height, spec.nchannels);
+  const ImageHeader& spec = in->header();
+  if (spec.width < 1 || spec.height < 1 || spec.channels < 1)
+    ThrowBadInput("image '{}' has an invalid size {}x{}x{}", name, spec.width, spec.height, spec.channels);
   if (spec.depth > 1)
     ThrowBadInput("image '{}' is a volume of {} slices: only 2-D images are read", name, spec.depth);
   const std::uint64_t pixels = std::uint64_t(spec.width) * std::uint64_t(spec.height);
@@ -126,26 +119,25 @@ Image Decode(const std::string& name, const std::string& bytes, const ImageReadO
                   "and the machine has the memory ({:.3g} GiB for its {} channel(s) as float), pass --max-pixels {} "
                   "or more",
                   name, spec.width, spec.height, pixels, options.max_pixels,
-                  4.0 * double(pixels) * spec.nchannels / double(1ull << 30), spec.nchannels, pixels);
-  CheckAllocation(4.0 * spec.width * spec.height * spec.nchannels, "image '" + name + "'");
-  Image img(spec.width, spec.height, spec.nchannels);
-  if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, img.pixels.data()))
-    ThrowBadInput("cannot decode image '{}' (truncated or corrupt?): {}", name, in->geterror());
-  const bool integer = spec.format.basetype != OIIO::TypeDesc::FLOAT && spec.format.basetype != OIIO::TypeDesc::HALF &&
-                       spec.format.basetype != OIIO::TypeDesc::DOUBLE;
-  const std::string cs = Lower(spec.get_string_attribute("oiio:ColorSpace"));
+                  4.0 * double(pixels) * spec.channels / double(1ull << 30), spec.channels, pixels);
+  CheckAllocation(4.0 * spec.width * spec.height * spec.channels, "image '" + name + "'");
+  Image img(spec.width, spec.height, spec.channels);
+  if (!in->Read(img.pixels.data(), &error))
+    ThrowBadInput("cannot decode image '{}' (truncated or corrupt?): {}", name, error);
+  const bool integer = spec.integer;
+  const std::string cs = Lower(spec.colorspace);
   bool srgb = integer && (cs == "srgb" || (cs.empty() && (ext == ".png" || ext == ".jpg" || ext == ".jpeg")));
   if (integer && options.colorspace != "auto") srgb = options.colorspace == "srgb";
   if (integer && options.colorspace == "gamma") {
     const float g = static_cast<float>(options.gamma);
     const int alpha = spec.alpha_channel;
     for (std::size_t i = 0; i < img.pixels.size(); ++i)
-      if (static_cast<int>(i % std::size_t(spec.nchannels)) != alpha) img.pixels[i] = std::pow(std::max(img.pixels[i], 0.0f), g);
+      if (static_cast<int>(i % std::size_t(spec.channels)) != alpha) img.pixels[i] = std::pow(std::max(img.pixels[i], 0.0f), g);
   }
   if (srgb) {
     const int alpha = spec.alpha_channel;
     for (std::size_t i = 0; i < img.pixels.size(); ++i)
-      if (static_cast<int>(i % std::size_t(spec.nchannels)) != alpha) img.pixels[i] = SrgbToLinear(img.pixels[i]);
+      if (static_cast<int>(i % std::size_t(spec.channels)) != alpha) img.pixels[i] = SrgbToLinear(img.pixels[i]);
   }
   return img;
 }
@@ -170,41 +162,36 @@ void WriteImage(const std::filesystem::path& path, const Image& image, const Ima
   const std::string ext = Lower(path.extension().string());
   PixelFormat fmt = options.format;
   if (!options.has_format) fmt = ext == ".exr" ? PixelFormat::kFloat : (ext == ".jpg" ? PixelFormat::kUint8 : PixelFormat::kUint16);
-  OIIO::TypeDesc type = fmt == PixelFormat::kUint8    ? OIIO::TypeDesc::UINT8
-                        : fmt == PixelFormat::kUint16 ? OIIO::TypeDesc::UINT16
-                        : fmt == PixelFormat::kHalf   ? OIIO::TypeDesc::HALF
-                                                      : OIIO::TypeDesc::FLOAT;
   std::vector<float> buf = image.pixels;
   const bool integer = fmt == PixelFormat::kUint8 || fmt == PixelFormat::kUint16;
   for (auto& v : buf) {
     if (!std::isfinite(v)) v = 0;
     if (integer) v = options.srgb ? LinearToSrgb(v) : std::clamp(v, 0.0f, 1.0f);
   }
-  OIIO::ImageSpec spec(image.width, image.height, image.channels, type);
-  spec.attribute("oiio:ColorSpace", integer && options.srgb ? "sRGB" : "linear");
-  spec.alpha_channel = -1;
-  spec.attribute("oiio:UnassociatedAlpha", 1);
-  if (ext == ".exr") spec.attribute("compression", "zip");
-  if ((ext == ".jpg" || ext == ".jpeg") && options.jpeg_quality > 0)
-    spec.attribute("Compression", fmt::format("jpeg:{}", std::clamp(options.jpeg_quality, 1, 100)));
-  auto writer = OIIO::ImageOutput::create(path.string());
-  if (!writer) ThrowUsage("cannot write image '{}': unsupported file type '{}'", path.string(), ext);
+  ImageEncoding encoding;
+  encoding.format = fmt;
+  encoding.srgb = integer && options.srgb;
+  encoding.exr_zip = ext == ".exr";
+  if ((ext == ".jpg" || ext == ".jpeg") && options.jpeg_quality > 0) encoding.jpeg_quality = std::clamp(options.jpeg_quality, 1, 100);
+  const ImagePlugin& plugin = LoadImagePlugin();
   // Encoded in memory, then written by WriteFileAtomic, whose every write is checked: OpenImageIO
   // 2.4 does not check the buffered writes its file layer flushes at close (a full disk would
   // pass unnoticed). Formats without I/O proxies are written to a temporary file directly.
-  if (writer->supports("ioproxy")) {
-    std::vector<unsigned char> bytes;
-    OIIO::Filesystem::IOVecOutput proxy(bytes);
-    if (!writer->set_ioproxy(&proxy) || !writer->open(path.string(), spec) ||
-        !writer->write_image(OIIO::TypeDesc::FLOAT, buf.data()) || !writer->close() || writer->has_error())
-      ThrowIo("cannot encode image '{}': {}", path.string(), writer->geterror());
+  std::vector<unsigned char> bytes;
+  bool writer_found = false;
+  std::string error;
+  const PluginStatus status = plugin.Encode(path.string(), image.width, image.height, image.channels, encoding,
+                                            buf.data(), &bytes, &writer_found, &error);
+  if (status == PluginStatus::kOk) {
     WriteFileAtomic(path, bytes.data(), bytes.size());
     return;
   }
+  if (!writer_found) ThrowUsage("cannot write image '{}': unsupported file type '{}'", path.string(), ext);
+  if (status == PluginStatus::kFailed) ThrowIo("cannot encode image '{}': {}", path.string(), error);
   AtomicOutput out(path);
-  if (!writer->open(out.temp_path().string(), spec) || !writer->write_image(OIIO::TypeDesc::FLOAT, buf.data()) ||
-      !writer->close() || writer->has_error())
-    ThrowIo("cannot write image '{}': {}", path.string(), writer->geterror());
+  if (!plugin.WriteFile(path.string(), out.temp_path().string(), image.width, image.height, image.channels, encoding,
+                        buf.data(), &error))
+    ThrowIo("cannot write image '{}': {}", path.string(), error);
   out.Commit();
 }
 

@@ -1,5 +1,6 @@
 #pragma once
-// Image files through OpenImageIO. Pixels in memory are always linear float32, row-major,
+// Image files through OpenImageIO, loaded on first use with the image plugin (image_plugin.h).
+// Pixels in memory are always linear float32, row-major,
 // channel fastest, y down (row 0 = top of the picture).
 #include <cstdint>
 #include <filesystem>

@@ -301,5 +301,33 @@ TEST(BtfEvalCli, RenderWritesAnSrgbPngAndTheSceneCommandsRefuseBadInput) {
   EXPECT_NE(out.find("cannot run '/nonexistent/node'"), std::string::npos) << out;
 }
 
+// OpenImageIO loads only with the image plugin, on the first image read or written: without the
+// plugin a command writing an image fails with btf::Error (I/O, exit 4) saying what to do and
+// writes nothing, while a command that touches no image runs as before.
+TEST(BtfEvalCli, WithoutTheImagePluginOnlyImageCommandsFailAndSayWhatToDo) {
+  const auto dir = test::TempDir();
+  const std::string tool = test::Tool("btf-eval");
+  CompressOptions o;
+  o.components = 2;
+  const Dataset ref = test::MakeTestDataset(5, 5, 4, 4);
+  WriteDataset(dir / "ref.h5", ref);
+  WriteCodec(dir / "c.h5", test::CompressDataset(ref, o));
+  std::filesystem::create_directories(dir / "empty");
+  const std::string no_plugin = "BTF_PLUGIN_DIR=" + Q(dir / "empty") + " " + tool;
+  std::string out;
+  EXPECT_EQ(test::RunCommand(no_plugin + " render " + Q(dir / "c.h5") + " -o " + Q(dir / "x.png") + " --size 16x12 2>&1", &out),
+            4)
+      << out;
+  for (const std::string& part : {std::string("libbtf_oiio.so"), (dir / "empty").string(), std::string("BTF_PLUGIN_DIR")})
+    EXPECT_NE(out.find(part), std::string::npos) << out << " / " << part;
+  EXPECT_FALSE(std::filesystem::exists(dir / "x.png"));
+  EXPECT_EQ(test::RunCommand(no_plugin + " compare " + Q(dir / "ref.h5") + " " + Q(dir / "c.h5") + " -q 2>&1", &out), 0)
+      << out;
+  // The build tree's plugin, found from the tool's folder.
+  EXPECT_EQ(test::RunCommand(tool + " render " + Q(dir / "c.h5") + " -o " + Q(dir / "x.png") + " --size 16x12 -q 2>&1", &out), 0)
+      << out;
+  EXPECT_EQ(ReadImage(dir / "x.png").width, 16);
+}
+
 }  // namespace
 }  // namespace btf

@@ -8,7 +8,8 @@
 #      package database);
 #   4. dpkg installs it into an empty scratch root (its own dpkg database, --force-depends because
 #      that root holds no other package), and btf-info --version, btf-synth and the Python module
-#      run from there with this machine's system libraries, carrying no path into the build tree.
+#      run from there with this machine's system libraries, carrying no path into the build tree
+#      (btf-eval render: the image plugin found in usr/lib/libbtf).
 # Not proven: installing into a truly fresh Debian root (needs the network to fetch the
 # dependencies; docs/install.md says how to check that by hand).
 # Usage: deb_test.sh BUILD_DIR VERSION [PYTHON]
@@ -77,7 +78,10 @@ out=$("$root/usr/bin/btf-info" --version)
 [ "$out" = "btf-info $version" ] || fail "btf-info --version printed '$out'"
 "$root/usr/bin/btf-synth" btf --views 0,1 --lights 0,3 --resolution 4 --samples 1 -q -o "$work/d.h5"
 "$root/usr/bin/btf-info" --json "$work/d.h5" | grep -q '"views": *2' || fail "btf-info from the package on a btf-synth dataset"
-echo "from $root/usr/bin: '$out', btf-synth + btf-info ok"
+"$root/usr/bin/btf-compress" "$work/d.h5" --method pca-view -c 1 -q -o "$work/c.h5"
+"$root/usr/bin/btf-eval" render "$work/c.h5" -o "$work/r.png" --size 16x12 -q  # the image plugin, from usr/lib/libbtf
+[ -s "$work/r.png" ] || fail "btf-eval render from the package wrote no PNG"
+echo "from $root/usr/bin: '$out', btf-synth + btf-info + btf-compress + btf-eval render ok"
 if [ -n "$python" ]; then
   out=$(PYTHONPATH=$root/usr/lib/python3/dist-packages "$python" -c "import libbtf; print(libbtf.__file__, libbtf.open('$work/d.h5').shape)")
   [ "$out" = "$root/usr/lib/python3/dist-packages/$(cd "$root/usr/lib/python3/dist-packages" && ls libbtf*.so) (2, 2, 4, 4, 3)" ] ||

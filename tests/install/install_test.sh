@@ -2,7 +2,8 @@
 # ctest `install` and `install_more` (tests/CMakeLists.txt): installs this build into a scratch
 # prefix and uses it the way another program would (docs/install.md):
 #   1. cmake --install BUILD --prefix PREFIX; the installed btf-synth / btf-compress make a
-#      dataset and a codec;
+#      dataset and a codec, btf-eval renders a PNG through the image plugin, and no installed
+#      program or library links OpenImageIO;
 #   2. PARTS, a comma-separated list of
 #        shared     tests/install/consumer, an external CMake project, configured with
 #                   find_package(libbtf) against PREFIX, built and run (shared libraries; it
@@ -36,6 +37,16 @@ done
 "$prefix/bin/btf-compress" "$work/gt.h5" --method pca-view -c 2 -q --json -o "$work/codec.h5" >"$work/compress.json"
 want_rmse=$(sed -n 's/.*"rmse": *\([-0-9.eE+]*\).*/\1/p' "$work/compress.json" | head -1)
 [ -n "$want_rmse" ] || fail "no rmse in btf-compress --json output ($work/compress.json)"
+
+# Images go through the image plugin <libdir>/libbtf/libbtf_oiio.so, which the installed tools find
+# from bin/; no program or libbtf library links OpenImageIO (docs/architecture.md, "The image plugin").
+"$prefix/bin/btf-eval" render "$work/codec.h5" -o "$work/render.png" --size 16x12 -q ||
+  fail "the installed btf-eval render (image plugin from $prefix/lib/libbtf)"
+[ -s "$work/render.png" ] || fail "the installed btf-eval render wrote no PNG"
+for f in "$prefix"/bin/btf-* "$prefix"/lib/libbtf_*.so; do
+  ! readelf -d "$f" | grep -q 'NEEDED.*OpenImageIO' || fail "$f links OpenImageIO (only the image plugin may)"
+done
+echo "installed tools: image plugin found, no OpenImageIO in NEEDED"
 
 check_output() {  # NAME EXE
   local out
