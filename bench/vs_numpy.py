@@ -23,13 +23,14 @@ kernel architecture, threads) with the table, and warns when it is Debian's refe
 (install libopenblas0-pthread; ./run bench does). It also prints NumPy's and Eigen's float32 GEMM
 rates, measured in the same run.
 """
+import json
 import os
 import subprocess
 import sys
 import tempfile
 import time
 
-from peer_env import blas_kernel, fair_environment  # noqa: E402  (bench/peer_env.py)
+from peer_env import blas_kernel, fair_environment  # bench/peer_env.py
 
 UNSET = fair_environment()  # before NumPy loads its BLAS: a peer slowed by these variables is no peer
 import numpy as np  # noqa: E402
@@ -57,7 +58,6 @@ def our_gemm_rate(build):
         return None
     out = subprocess.run([exe, "--benchmark_filter=BM_EigenGemm<float>", "--benchmark_format=json"],
                          capture_output=True, text=True, check=True).stdout
-    import json
     rates = [b["GFLOPs"] for b in json.loads(out)["benchmarks"] if "GFLOPs" in b]
     return rates[0] if rates else None
 
