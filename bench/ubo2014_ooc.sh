@@ -2,7 +2,7 @@
 # Out-of-core benchmark (docs/btf-compress.md "Out-of-core LPCA" and "Neural codec"): writes the
 # benchmarks' synthetic BTF (bench/synthetic_btf.h; synthetic, not a material model) slot by slot
 # with bench_synthetic_input, then runs btf-compress --method lpca -k 32 -c 8 --lpca-memory
-# out-of-core (METHOD=neural: --method neural, default options; the training set is drawn in one
+# out-of-core (METHOD=neural: --method neural, default options but the log epsilon; the training set is drawn in one
 # streaming pass) under /usr/bin/time -v and prints its wall time, peak memory, passes and
 # per-phase seconds.
 # Slow: the default is the UBO2014 size (ubo151 directions, 400^2 texels, RGB: 43.8 GB of input,
@@ -11,8 +11,9 @@
 #   bench/ubo2014_ooc.sh BUILD_DIR OUT_DIR
 #
 # Environment: DIRECTIONS (default ubo151), RESOLUTION (default 400), METHOD (lpca, the default, or
-# neural), LPCA_FLAGS (default "-k 32 -c 8"), NEURAL_FLAGS (default none), BTF_MAX_BYTES (the
-# memory limit LPCA streams within; default: the library's).
+# neural), LPCA_FLAGS (default "-k 32 -c 8"), NEURAL_FLAGS (default "--log-epsilon 1": the
+# synthetic values dip slightly below 0, outside the neural codec's log domain at the default
+# epsilon), BTF_MAX_BYTES (the memory limit LPCA streams within; default: the library's).
 set -euo pipefail
 build=${1:?usage: bench/ubo2014_ooc.sh BUILD_DIR OUT_DIR}
 out=${2:?usage: bench/ubo2014_ooc.sh BUILD_DIR OUT_DIR}
@@ -20,6 +21,7 @@ bin=$(cd "$build/bin" && pwd)
 dirs=${DIRECTIONS:-ubo151}
 res=${RESOLUTION:-400}
 lpca_flags=${LPCA_FLAGS:-"-k 32 -c 8"}
+neural_flags=${NEURAL_FLAGS:-"--log-epsilon 1"}
 mkdir -p "$out"
 input="$out/synthetic_${dirs}_${res}.h5"
 if [[ ! -f $input ]]; then
@@ -30,7 +32,7 @@ fi
 method=${METHOD:-lpca}
 case $method in
   lpca) flags=(--method lpca $lpca_flags --lpca-memory out-of-core) ;;
-  neural) flags=(--method neural ${NEURAL_FLAGS:-}) ;;
+  neural) flags=(--method neural $neural_flags) ;;
   *) echo "METHOD must be lpca or neural" >&2; exit 2 ;;
 esac
 /usr/bin/time -v "$bin/btf-compress" "$input" "${flags[@]}" -o "$out/$method.h5" --json > "$out/summary.json" 2> "$out/time.txt"

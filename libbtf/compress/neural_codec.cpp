@@ -65,7 +65,8 @@ void NeuralCodecModel::DecodeImages(Eigen::Index n, const float* wi, const float
   // Layer 0 is W_0 [z; e] + b_0 = W_z z + (W_e e + b_0): the latent part once per texel (P), the
   // direction part once per pair. Both loops hand out the same chunks for any thread count, and
   // Eigen runs each product on its thread alone inside the parallel region.
-  Eigen::MatrixXf P(H, T);
+  // P row-major: a chunk's rows are contiguous runs of texels, the lane-major layout Infer takes.
+  Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> P(H, T);
 #pragma omp parallel
   {
 #pragma omp for schedule(static)
@@ -74,7 +75,6 @@ void NeuralCodecModel::DecodeImages(Eigen::Index n, const float* wi, const float
       P.middleCols(begin, count).noalias() = W0.leftCols(latent) * latents.middleCols(begin, count);
     }
     NeuralNet::Workspace ws;
-    Eigen::MatrixXf z0;
     Eigen::VectorXf e(E), d(H);
 #pragma omp for schedule(static)
     for (Eigen::Index k = 0; k < n * per_pair; ++k) {
@@ -82,8 +82,7 @@ void NeuralCodecModel::DecodeImages(Eigen::Index n, const float* wi, const float
       EncodeDirections(encoding, wi + 3 * pair, wo + 3 * pair, e.data());
       d.noalias() = W0.rightCols(E) * e;
       d += net.bias(0);
-      z0 = P.middleCols(begin, count).colwise() + d;
-      Eigen::Map<Eigen::MatrixXf>(out + (pair * T + begin) * C, C, count) = net.ForwardFromFirstLayer(std::move(z0), ws);
+      net.Infer(P.data() + begin, T, d.data(), count, out + (pair * T + begin) * C, ws);
     }
   }
 }

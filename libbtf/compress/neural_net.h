@@ -89,11 +89,17 @@ class BasicNeuralNet {
 
   // X: inputs x batch. Returns the outputs x batch result (held in ws).
   const Matrix& Forward(const Eigen::Ref<const Matrix>& X, Workspace& ws) const;
-  // The same from layer 0's pre-activation z0 = W_0 X + b_0 (first layer's outputs x batch; taken
-  // over by ws), for a caller that computes the first layer in parts: decoding many direction
-  // pairs for the same latents computes W_0's latent columns once per texel. Inference only: ws
-  // then holds nothing for Backward.
-  const Matrix& ForwardFromFirstLayer(Matrix&& z0, Workspace& ws) const;
+  // Inference from layer 0's pre-activation, for a caller that computes the first layer in parts
+  // (decoding many direction pairs for the same latents computes W_0's latent columns once per
+  // texel): sample j < count has z0(i, j) = p[i * ld + j] + shift[i] (i < the first layer's
+  // width); its outputs go to out[j * outputs + c]. Samples go through all layers in groups of a
+  // few SIMD packets, lane-major (row i of a group contiguous), each product accumulated in
+  // registers with the weights broadcast: no packing of small matrices as a general GEMM does, and
+  // the group's activations stay in the L1 cache. Activations are the ones Forward applies; sums
+  // run over k in order, so values agree with Forward's to rounding. ws: scratch, one per thread
+  // (holds nothing for Backward afterwards).
+  void Infer(const Scalar* p, Eigen::Index ld, const Scalar* shift, Eigen::Index count, Scalar* out,
+             Workspace& ws) const;
   // After Forward(X, ws): dY (outputs x batch) is d(loss)/d(output). Adds d(loss)/d(parameters)
   // to grad (parameter_count() values); writes d(loss)/dX (inputs x batch) to dX unless null.
   void Backward(const Eigen::Ref<const Matrix>& X, const Eigen::Ref<const Matrix>& dY, Workspace& ws, Scalar* grad,

@@ -1,7 +1,8 @@
 // The neural codec's numerical core (neural_net.h): the MLP's gradients against central finite
 // differences, Adam and lazy Adam against the update written out, the trainer's reduced gradient
 // against the double network, a fit of synthetic lobes, the same bits for 1 and 2 threads and for
-// blocks computed in parts, cancelling, refused input, and finite results at grazing directions.
+// blocks computed in parts, the decoder's inference path against Forward, cancelling, refused
+// input, and finite results at grazing directions.
 #include <gtest/gtest.h>
 #include <omp.h>
 
@@ -130,6 +131,29 @@ TEST(NeuralNet, ExtremePreActivationsStayFinite) {
     for (const float v : g) ASSERT_TRUE(std::isfinite(v)) << ActivationName(act);
     EXPECT_TRUE(dX.allFinite()) << ActivationName(act);
   }
+}
+
+TEST(NeuralNet, InferAgreesWithForward) {
+  // Infer (the decoder's path: lane-major groups, SiLU by its own exp and reciprocal) against
+  // Forward on the same samples: 37 columns (two full groups of 16 and a partial one on AVX2),
+  // layer 0 given as its product p (row stride 40 > 37) and the bias as the shift. Both sum
+  // <= 32 float products (~32 * 6e-8 relative to the sum of |terms|) and SiLU differs by <= 4e-7,
+  // so 1e-5 of the outputs' largest magnitude; scale 1e3: pre-activations of thousands, where
+  // the clamped exp must still give z or 0.
+  for (const Activation act : kActivations)
+    for (const double scale : {1.0, 1e3}) {
+      NeuralNet net(NeuralNetShape{12, {32, 24}, 3, act}, 7);
+      const Eigen::MatrixXf X = (RandomMatrix(12, 37, 8, 1.0) * scale).cast<float>();
+      NeuralNet::Workspace ws;
+      const Eigen::MatrixXf Y = net.Forward(X, ws);
+      Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> p(32, 40);
+      p.leftCols(37) = net.weight(0) * X;
+      Eigen::MatrixXf out(3, 37);
+      net.Infer(p.data(), 40, net.bias(0).data(), 37, out.data(), ws);
+      ASSERT_TRUE(out.allFinite()) << ActivationName(act) << " scale " << scale;
+      EXPECT_LE((out - Y).cwiseAbs().maxCoeff(), 1e-5f * Y.cwiseAbs().maxCoeff())
+          << ActivationName(act) << " scale " << scale;
+    }
 }
 
 TEST(NeuralAdam, DenseAndLazyUpdatesAreAdamWrittenOut) {
