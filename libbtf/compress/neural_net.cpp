@@ -194,14 +194,33 @@ const typename BasicNeuralNet<Scalar>::Matrix& BasicNeuralNet<Scalar>::Forward(c
   ws.z.resize(layers());
   ws.z[0].noalias() = weight(0) * X;
   ws.z[0].colwise() += bias(0);
-  return ForwardFromWorkspace(ws);
+  const int L = layers();
+  ws.a.resize(L);
+  ws.sig.resize(L);
+  for (int l = 0; l < L; ++l) {
+    Matrix& z = ws.z[l];
+    if (l > 0) {
+      z.noalias() = weight(l) * ws.a[l - 1];
+      z.colwise() += bias(l);
+    }
+    if (l + 1 < L) {
+      ws.a[l].resize(z.rows(), z.cols());
+      Scalar* sig = nullptr;
+      if (shape_.activation == Activation::kSilu) {
+        ws.sig[l].resize(z.rows(), z.cols());
+        sig = ws.sig[l].data();
+      }
+      Activate(shape_.activation, z.data(), ws.a[l].data(), sig, z.size());
+    }
+  }
+  return ws.z.back();
 }
 
 namespace {
 
 #if defined(__AVX2__) && defined(__FMA__)
-// SiLU for inference, a = z sigmoid(z) over n values (a multiple of 8), within 4e-7 (relative) of
-// Activate's: Eigen's exp and division are ~25 instructions and a divide per 8 values, half the
+// SiLU for inference, a = z sigmoid(z) over n values (a multiple of 8), within ~4e-7 (relative)
+// of Activate's: Eigen's exp and division are ~25 instructions and a divide per 8 values, half the
 // decoder's time at the default widths. Here exp(-z) = 2^t, t = -z log2(e) clamped to [-126, 126]
 // (2^n stays a normal float; sigmoid is 0 or 1 to float precision beyond), as 2^n 2^f with
 // f = t - round(t) in [-1/2, 1/2] and 2^f a degree-5 polynomial (least squares in the relative
@@ -315,31 +334,6 @@ void BasicNeuralNet<Scalar>::Infer(const Scalar* p, Eigen::Index ld, const Scala
     for (Eigen::Index j = 0; j < n; ++j)
       for (int c = 0; c < C; ++c) out[(j0 + j) * C + c] = z[c * S + j];
   }
-}
-
-template <typename Scalar>
-const typename BasicNeuralNet<Scalar>::Matrix& BasicNeuralNet<Scalar>::ForwardFromWorkspace(Workspace& ws,
-                                                                                            bool for_backward) const {
-  const int L = layers();
-  ws.a.resize(L);
-  ws.sig.resize(L);
-  for (int l = 0; l < L; ++l) {
-    Matrix& z = ws.z[l];
-    if (l > 0) {
-      z.noalias() = weight(l) * ws.a[l - 1];
-      z.colwise() += bias(l);
-    }
-    if (l + 1 < L) {
-      ws.a[l].resize(z.rows(), z.cols());
-      Scalar* sig = nullptr;
-      if (for_backward && shape_.activation == Activation::kSilu) {
-        ws.sig[l].resize(z.rows(), z.cols());
-        sig = ws.sig[l].data();
-      }
-      Activate(shape_.activation, z.data(), ws.a[l].data(), sig, z.size());
-    }
-  }
-  return ws.z.back();
 }
 
 template <typename Scalar>
