@@ -9,7 +9,8 @@
 #   4. dpkg installs it into an empty scratch root (its own dpkg database, --force-depends because
 #      that root holds no other package), and btf-info --version, btf-synth and the Python module
 #      run from there with this machine's system libraries, carrying no path into the build tree
-#      (btf-eval render: the image plugin found in usr/lib/libbtf).
+#      (btf-eval render: the image plugin found in usr/lib/libbtf; btf-synth: its tool module
+#      found there).
 # Not proven: installing into a truly fresh Debian root (needs the network to fetch the
 # dependencies; docs/install.md says how to check that by hand).
 # Usage: deb_test.sh BUILD_DIR VERSION [PYTHON]

@@ -3,7 +3,8 @@
 # prefix and uses it the way another program would (docs/install.md):
 #   1. cmake --install BUILD --prefix PREFIX; the installed btf-synth / btf-compress make a
 #      dataset and a codec, btf-eval renders a PNG through the image plugin, and no installed
-#      program or library links OpenImageIO;
+#      program or library links OpenImageIO; btf-register and btf-synth are launchers that link
+#      no libbtf, OpenCV, MPI or HDF5 and find their tool modules;
 #   2. PARTS, a comma-separated list of
 #        shared     tests/install/consumer, an external CMake project, configured with
 #                   find_package(libbtf) against PREFIX, built and run (shared libraries; it
@@ -47,6 +48,15 @@ for f in "$prefix"/bin/btf-* "$prefix"/lib/libbtf_*.so; do
   ! readelf -d "$f" | grep -q 'NEEDED.*OpenImageIO' || fail "$f links OpenImageIO (only the image plugin may)"
 done
 echo "installed tools: image plugin found, no OpenImageIO in NEEDED"
+# btf-register and btf-synth are launchers of their tool modules <libdir>/libbtf/libbtf_tool_<tool>.so
+# (docs/architecture.md, "Tool modules"; btf-synth above ran through its module): they link no
+# libbtf, OpenCV, MPI or HDF5, and btf-register --help loads its module (OpenCV resolved).
+for t in btf-register btf-synth; do
+  [ -f "$prefix/lib/libbtf/libbtf_tool_$t.so" ] || fail "cmake --install did not install lib/libbtf/libbtf_tool_$t.so"
+  ! readelf -d "$prefix/bin/$t" | grep -Eq 'NEEDED.*(opencv|libbtf|mpi|hdf5)' || fail "the installed $t links what its module should"
+done
+"$prefix/bin/btf-register" --help >/dev/null || fail "the installed btf-register --help (its module from $prefix/lib/libbtf)"
+echo "installed btf-register, btf-synth: launchers, modules found"
 
 check_output() {  # NAME EXE
   local out

@@ -227,7 +227,7 @@ int RunRegister(const CLI::App& app, const btf::cli::CommonFlags& common, RunFla
 
 }  // namespace
 
-int main(int argc, char** argv) {
+BTF_TOOL_MAIN(int argc, char** argv) {
   CLI::App app{"Register measurement photos (AprilTag markers) into a rectified BTF dataset, or detect markers.",
                "btf-register"};
   btf::cli::Configure(app);

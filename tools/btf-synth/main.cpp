@@ -145,7 +145,7 @@ int RunPhotos(const CLI::App& app, const btf::cli::CommonFlags& common, PhotoFla
 
 }  // namespace
 
-int main(int argc, char** argv) {
+BTF_TOOL_MAIN(int argc, char** argv) {
   CLI::App app{"Ground-truth BTFs, far-field BRDFs and synthetic measurement photos from cloth models.", "btf-synth"};
   btf::cli::Configure(app);
   app.require_subcommand(1);

@@ -13,6 +13,7 @@
 #include "libbtf/core/atomic_file.h"
 #include "libbtf/core/progress.h"
 #include "libbtf/io/dataset_io.h"
+#include "tools/common/tool_main.h"
 
 namespace btf::cli {
 
