@@ -31,6 +31,17 @@ TEST(Messages, MistypedOptionsAndCommandsGetTheNearestName) {
   EXPECT_NE(none.find("sweep"), std::string::npos) << none;
 }
 
+TEST(Messages, AnOptionQuotedWithItsValueIsNamed) {
+  // "--log-epsilon 1" as one argument (a script's quoted variable): not "unknown option
+  // '--log-epsilon' (did you mean '--log-epsilon'?)".
+  const std::string out = Output(test::Tool("btf-compress") + " in.h5 --method neural '--log-epsilon 1' -o out.h5", 2);
+  EXPECT_NE(out.find("btf-compress: error: '--log-epsilon 1' is one argument: give the option and its value as two "
+                     "(--log-epsilon 1) or as --log-epsilon=1"),
+            std::string::npos)
+      << out;
+  EXPECT_EQ(out.find("did you mean"), std::string::npos) << out;
+}
+
 TEST(Messages, OptionChecksSayWhatTheOptionMustBeInWords) {
   const auto dir = test::TempDir();
   const std::string in = (dir / "in.h5").string();

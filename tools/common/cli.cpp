@@ -3,6 +3,7 @@
 #include <malloc.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -294,6 +295,17 @@ std::string ParseErrorMessage(const CLI::App& app, const CLI::ParseError& e, int
   std::vector<std::string> options, commands;
   CollectNames(app, options, commands);
   std::string what = e.what();
+  // An option and its value quoted together ("--log-epsilon 1" as one argument, as a script's
+  // variable gives them): CLI11 reads one unknown option and reports its words apart.
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    const std::size_t space = arg.find_first_of(" \t");
+    if (arg.rfind('-', 0) != 0 || space == std::string::npos) continue;
+    const std::string name = arg.substr(0, space);
+    if (std::find(options.begin(), options.end(), name) != options.end())
+      return fmt::format("'{}' is one argument: give the option and its value as two ({} {}) or as {}={}; see {} --help",
+                         arg, name, arg.substr(space + 1), name, arg.substr(space + 1), app.get_name());
+  }
   if (dynamic_cast<const CLI::ExtrasError*>(&e)) {
     const std::size_t colon = what.find(": ");
     std::vector<std::string> unknown, positional;
