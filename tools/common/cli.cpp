@@ -301,10 +301,10 @@ std::string ParseErrorMessage(const CLI::App& app, const CLI::ParseError& e, int
     const std::string arg = argv[i];
     const std::size_t space = arg.find_first_of(" \t");
     if (arg.rfind('-', 0) != 0 || space == std::string::npos) continue;
-    const std::string name = arg.substr(0, space);
+    const std::string name = arg.substr(0, space), value = arg.substr(space + 1);
     if (std::find(options.begin(), options.end(), name) != options.end())
       return fmt::format("'{}' is one argument: give the option and its value as two ({} {}) or as {}={}; see {} --help",
-                         arg, name, arg.substr(space + 1), name, arg.substr(space + 1), app.get_name());
+                         arg, name, value, name, value, app.get_name());
   }
   if (dynamic_cast<const CLI::ExtrasError*>(&e)) {
     const std::size_t colon = what.find(": ");
