@@ -306,6 +306,7 @@ void BM_Lpca(benchmark::State& st) {
   o.lpca.gram_limit = static_cast<int>(st.range(1));
   o.lpca.warm_start = st.range(2) != 0;
   o.lpca.prune = st.range(3) != 0;
+  o.lpca.subspace = static_cast<int>(st.range(4));
   btf::CompressSummary s;
   const auto source = btf::MemorySource(d);
   for (auto _ : st) {
@@ -315,9 +316,10 @@ void BM_Lpca(benchmark::State& st) {
   SetSizeCounters(st);
   const btf::CompressOptions defaults;
   const bool is_default = o.lpca.gram_limit == defaults.lpca.gram_limit && o.lpca.warm_start == defaults.lpca.warm_start &&
-                          o.lpca.prune == defaults.lpca.prune;
+                          o.lpca.prune == defaults.lpca.prune && o.lpca.subspace == defaults.lpca.subspace;
   st.SetLabel("gram_limit " + std::to_string(o.lpca.gram_limit) + (o.lpca.warm_start ? ", warm start" : ", cold start") +
-              (o.lpca.prune ? ", pruned" : ", every cluster") + (is_default ? " (default)" : " (before)"));
+              (o.lpca.prune ? ", pruned" : ", every cluster") + ", subspace " + std::to_string(o.lpca.subspace) +
+              (is_default ? " (default)" : " (before)"));
   // Clusters whose residual a texel's reassignment computed, mean over the reassignments.
   double compared = 0;
   for (double c : s.lpca_compared) compared += c / double(s.lpca_compared.size());
@@ -333,13 +335,15 @@ void BM_Lpca(benchmark::State& st) {
   if (is_default) g_lpca_seconds = s.times.Total();
 }
 // Args: max_iterations, gram_limit, warm start (CompressOptions::lpca_warm_start), pruned
-// reassignment (CompressOptions::lpca_prune). Before (every randomized cluster fit from a Gaussian
-// sketch; every cluster compared in each reassignment) first, then the default, whose codec the
-// decode benchmarks use.
+// reassignment (CompressOptions::lpca_prune), the sample rounds' subspace (lpca_subspace; 0: the
+// full dimension). Before (every randomized cluster fit from a Gaussian sketch; every cluster
+// compared in each reassignment; sample rounds in the full dimension) first, then the default,
+// whose codec the decode benchmarks use.
 BENCHMARK(BM_Lpca)
-    ->Args({20, 256, 0, 1})
-    ->Args({20, 256, 1, 0})
-    ->Args({20, 256, 1, 1})
+    ->Args({20, 256, 0, 1, 128})
+    ->Args({20, 256, 1, 0, 128})
+    ->Args({20, 256, 1, 1, 0})
+    ->Args({20, 256, 1, 1, 128})
     ->Unit(benchmark::kSecond)
     ->Iterations(1)
     ->UseRealTime();

@@ -355,6 +355,7 @@ auto CompressKeywords() {
       Member("lpca_memory", [](auto& o) -> auto& { return o.lpca.memory; }),
       Member("lpca_sample", [](auto& o) -> auto& { return o.lpca.sample; }),
       Member("lpca_splits", [](auto& o) -> auto& { return o.lpca.splits; }),
+      Member("lpca_subspace", [](auto& o) -> auto& { return o.lpca.subspace; }),
       Member("lpca_matrix", [](auto& o) -> auto& { return o.lpca.matrix; }),
       Member("neural_latent", [](auto& o) -> auto& { return o.neural.latent; }),
       Member("neural_hidden", [](auto& o) -> auto& { return o.neural.hidden; }),

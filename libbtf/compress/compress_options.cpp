@@ -30,6 +30,7 @@ void LpcaOptions::Check() const {
   BTF_CHECK_OPTION(gram_limit >= 1, "gram_limit", "must be >= 1");
   BTF_CHECK_OPTION(sample >= 1, "lpca_sample", "must be >= 1");
   BTF_CHECK_OPTION(splits >= 0 && splits <= 1000, "lpca_splits", "must be 0..1000");
+  BTF_CHECK_OPTION(subspace >= 0 && subspace <= 65536, "lpca_subspace", "must be 0..65536");
 }
 
 void LpcaTensorOptions::Check() const {
@@ -84,7 +85,8 @@ nlohmann::json CompressOptions::ToJson() const {
           {"log_transform", log_transform}, {"log_epsilon", log_epsilon},
           {"max_iterations", lpca.max_iterations}, {"min_improvement", lpca.min_improvement},
           {"lpca_memory", lpca.memory},     {"lpca_sample", lpca.sample},
-          {"lpca_splits", lpca.splits},     {"lpca_matrix", lpca.matrix},
+          {"lpca_splits", lpca.splits},     {"lpca_subspace", lpca.subspace},
+          {"lpca_matrix", lpca.matrix},
           {"gram_limit", lpca.gram_limit},  {"lpca_warm_start", lpca.warm_start},
           {"lpca_prune", lpca.prune},       {"storage", StorageName(storage)},
           {"max_bytes", max_bytes},         {"quant_bits", tensor.quant_bits},

@@ -40,6 +40,12 @@ struct LpcaOptions {
   // rounds from there; kept if the sample's error falls, stopped at the first that does not fall
   // by min_improvement). 0: none.
   int splits = 4;
+  // k-means and the sample rounds work in the sample's principal subspace of this many dimensions
+  // (a PCA of an evenly spread subset of 2 subspace sample texels; each texel's energy outside it
+  // is carried as a constant), and their models are lifted back for the rounds over every texel,
+  // which then fit the full dimension. Used where 2 subspace <= min(d, sample); 0: never (the
+  // sample rounds in the full dimension, d = V L C).
+  int subspace = 128;
   // Per-cluster decomposition: Gram matrix of the smaller side (double) when min(n, d) <= this,
   // randomized SVD (c + 10 oversampling, 2 power iterations) otherwise. 256: the measured
   // crossover at c = 8 (bench_compress BM_ClusterPca).

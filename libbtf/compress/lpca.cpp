@@ -72,9 +72,25 @@ class LpcaRun : public LpcaPhase {
     // Phases: kmeans (the sample, seeds and Lloyd; on ranks other than 0 also the wait for rank 0's
     // sample rounds), sample_rounds, first_fit (the first assignment of all texels and their PCA).
     Timer t;
-    double kmeans_s = 0;
+    double kmeans_s = 0, subspace_s = 0;
     auto on_sample = [&](const auto& M, const double* norms, const std::vector<std::size_t>& rows) {
       std::vector<std::int32_t> assign;
+      const int dims = o_.lpca.subspace;
+      if (dims > 0 && 2 * std::size_t(dims) <= std::min(d_, rows.size())) {
+        const SampleSubspace sub = sampler.Subspace(M, norms, rows, dims);
+        subspace_s = t.Seconds();
+        if (sub.pca.components() > 0) {
+          LpcaSampler inner({setup_.ctx, setup_.sum, N_, std::size_t(sub.pca.components())}, K_);
+          inner.SetOutside(sub.outside, sub.energy);
+          std::vector<std::size_t> index(rows.size());
+          std::iota(index.begin(), index.end(), std::size_t(0));
+          rounds = inner.Lloyd(sub.Z, sub.norms.data(), index, rng, assign);
+          kmeans_s = t.Seconds();
+          models = inner.SampleRounds(sub.Z, sub.norms.data(), index, std::move(assign), sample_errors, split_errors);
+          for (PcaResult& m : models) m = sub.Lift(m);
+          return;
+        }
+      }
       rounds = sampler.Lloyd(M, norms, rows, rng, assign);
       kmeans_s = t.Seconds();
       models = sampler.SampleRounds(M, norms, rows, std::move(assign), sample_errors, split_errors);
@@ -107,7 +123,8 @@ class LpcaRun : public LpcaPhase {
       }
     }
     if (kmeans_s == 0) kmeans_s = t.Seconds();
-    sum_.times.Add("kmeans", kmeans_s);
+    if (subspace_s > 0) sum_.times.Add("subspace", subspace_s);
+    sum_.times.Add("kmeans", kmeans_s - subspace_s);
     sum_.times.Add("sample_rounds", t.Seconds() - kmeans_s);
     t.Restart();
     ClusterFit fit;

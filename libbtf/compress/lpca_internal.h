@@ -24,6 +24,7 @@
 
 #include "libbtf/compress/lpca_reassign.h"
 #include "libbtf/compress/method.h"
+#include "libbtf/core/memory.h"
 #include "libbtf/io/half.h"
 
 namespace btf::lpca {
@@ -39,11 +40,13 @@ class TexelMatrix {
  public:
   using HalfMatrix = Eigen::Matrix<Eigen::half, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 
+  // Allocated with huge-page advice (core/memory.h): the read writes it all at once.
   void Resize(std::size_t rows, std::size_t cols, bool half) {
     Clear();
     half_ = half;
     if (half_) h_.resize(static_cast<Eigen::Index>(rows), static_cast<Eigen::Index>(cols));
     else f_.resize(static_cast<Eigen::Index>(rows), static_cast<Eigen::Index>(cols));
+    AdviseHugePages(half_ ? static_cast<void*>(h_.data()) : static_cast<void*>(f_.data()), rows * cols * (half_ ? 2 : 4));
   }
   void Clear() { f_.resize(0, 0), h_.resize(0, 0); }
   std::size_t cols() const { return std::size_t(half_ ? h_.cols() : f_.cols()); }
@@ -306,11 +309,37 @@ class LpcaRows : public LpcaPhase {
   double total_ = 0;                 // their sum
 };
 
+// The sample's principal subspace (LpcaOptions::subspace): the PCA of an evenly spread subset of
+// the sample's rows (mean mu, basis W: r x d, orthonormal rows) and each sample row's coordinates
+// z = W (x - mu). A cluster model (mean m, basis E) in those coordinates is the model mu + W^T m,
+// E W of the full rows, and a row's squared residual under it is the coordinates' residual plus
+// ||x - mu||^2 - ||z||^2, the row's energy outside the subspace, the same under every such model.
+struct SampleSubspace {
+  PcaResult pca;              // mu and W (no scores)
+  RowMatrixXf Z;              // S x r, in sample order
+  std::vector<double> norms;  // ||z||^2 per sample row
+  double outside = 0;         // the sample's energy outside the subspace (each row's clamped at 0)
+  double energy = 0;          // the sample's energy, sum ||x||^2
+  // A model fitted to rows of Z as the model of the full rows (an empty cluster's stays empty).
+  PcaResult Lift(const PcaResult& p) const;
+};
+
 // k-means and local-PCA rounds on a sample of the texels (rows of a matrix M: the texel matrix
-// in core, the gathered sample rows otherwise), run by one rank. Instantiated for both matrices.
+// in core, the gathered sample rows otherwise, or a SampleSubspace's coordinates), run by one
+// rank. Instantiated for both matrices.
 class LpcaSampler : public LpcaPhase {
  public:
   LpcaSampler(const LpcaSetup& s, int clusters) : LpcaPhase(s), K_(clusters) {}
+
+  // The subspace of `dims` dimensions of the sample rows `rows` of M (norms: of M's rows): a
+  // Gram-path PCA (single-threaded: the same bits for any thread count) of n = min(S, 2 dims)
+  // sample rows drawn with the seed; the coordinates in static blocks of kRows.
+  template <typename Mat>
+  SampleSubspace Subspace(const Mat& M, const double* norms, const std::vector<std::size_t>& rows, int dims) const;
+
+  // A sampler of a subspace's coordinates: the sample's errors count the energy outside it and
+  // are relative to the full rows' energy.
+  void SetOutside(double outside, double energy) { outside_ = outside, energy_ = energy; }
 
   // Deterministic sample of max(lpca_sample, K) texels (sorted; all texels if fewer), drawn with the seed.
   std::vector<std::size_t> Sample(std::mt19937_64& rng) const;
@@ -387,6 +416,7 @@ class LpcaSampler : public LpcaPhase {
   static constexpr int kLloydRounds = 100;         // k-means rounds at most
   static constexpr double kLloydTolerance = 1e-5;  // stop when the objective improves by less (relative)
   const int K_;
+  double outside_ = 0, energy_ = -1;  // SetOutside; energy_ < 0: the sample's energy from the norms
 };
 
 // Per-cluster PCA and reassignment rounds over every texel, and the codec's model.

@@ -86,6 +86,64 @@ void NearestCenters(const Mat& M, const double* norms, const RowMatrixXf& center
 
 }  // namespace
 
+PcaResult SampleSubspace::Lift(const PcaResult& p) const {
+  PcaResult f = p;
+  f.scores.resize(0, 0);
+  if (p.mean.size() == 0) return f;
+  f.mean = pca.mean + pca.basis.transpose() * p.mean;
+  f.basis = p.basis * pca.basis;
+  return f;
+}
+
+template <typename Mat>
+SampleSubspace LpcaSampler::Subspace(const Mat& M, const double* norms, const std::vector<std::size_t>& rows,
+                                     int dims) const {
+  const std::size_t S = rows.size(), n = std::min(S, 2 * std::size_t(dims));
+  const Eigen::Index d = static_cast<Eigen::Index>(d_);
+  SampleSubspace s;
+  // A random subset (a strided one would alias with a weave's period), in sample order.
+  std::vector<std::size_t> pick(S);
+  std::iota(pick.begin(), pick.end(), std::size_t(0));
+  std::mt19937_64 rng(o_.seed);
+  std::shuffle(pick.begin(), pick.end(), rng);
+  pick.resize(n);
+  std::sort(pick.begin(), pick.end());
+  WidePcaResult w;
+  {
+    RowMatrixXf X(static_cast<Eigen::Index>(n), d);
+    for (std::size_t i = 0; i < n; ++i)
+      RowToFloat(M, static_cast<Eigen::Index>(rows[pick[i]]), X.row(Eigen::Index(i)).data());
+    PcaRequest q;
+    q.max_components = dims;
+    w = WidePca(X.data(), X.rows(), d, q);
+  }
+  const Eigen::Index r = w.components;
+  s.pca.mean = Eigen::Map<const Eigen::VectorXf>(w.mean.data(), d);
+  s.pca.basis = Eigen::Map<const RowMatrixXf>(w.basis.data(), r, d);
+  s.pca.eigenvalues = w.eigenvalues;
+  // Per block: P = X [W; mu]^T in one GEMM, z = P W-part - W mu, ||x - mu||^2 = ||x||^2 - 2 x.mu + ||mu||^2.
+  RowMatrixXf right(r + 1, d);
+  right.topRows(r) = s.pca.basis;
+  right.row(r) = s.pca.mean.transpose();
+  const Eigen::VectorXf wmu = (s.pca.basis.cast<double>() * s.pca.mean.cast<double>()).cast<float>();
+  const double mu2 = s.pca.mean.cast<double>().squaredNorm();
+  s.Z.resize(static_cast<Eigen::Index>(S), r);
+  s.norms.resize(S);
+  std::vector<double> outside(S);
+  ForBlocks(S, [&](std::size_t first, std::size_t count) {
+    const Eigen::MatrixXf P = GatheredProducts(M, rows.data(), first, count, right);
+    for (Eigen::Index i = 0; i < P.rows(); ++i) {
+      const std::size_t j = first + std::size_t(i);
+      auto z = s.Z.row(static_cast<Eigen::Index>(j));
+      z = P.row(i).head(r) - wmu.transpose();
+      s.norms[j] = z.cast<double>().squaredNorm();
+      outside[j] = std::max(0.0, norms[rows[j]] - 2.0 * double(P(i, r)) + mu2 - s.norms[j]);
+    }
+  });
+  for (std::size_t i = 0; i < S; ++i) s.outside += outside[i], s.energy += norms[rows[i]];
+  return s;
+}
+
 std::vector<std::size_t> LpcaSampler::Sample(std::mt19937_64& rng) const {
   std::vector<std::size_t> sample(N_);
   std::iota(sample.begin(), sample.end(), std::size_t(0));
@@ -117,8 +175,11 @@ std::vector<PcaResult> LpcaSampler::SampleRounds(const Mat& M, const double* nor
   // Progress: the first rounds, then each split/merge trial (the bar ends early when they stop).
   const std::size_t steps = std::size_t(o_.lpca.splits) + 1;
   rep_.Progress(0, steps, "sample rounds");
-  double energy = 0;
-  for (std::size_t t : rows) energy += norms[t];
+  double energy = energy_;
+  if (energy < 0) {
+    energy = 0;
+    for (std::size_t t : rows) energy += norms[t];
+  }
   std::vector<double> residual;
   ClusterFit fit{{}, std::move(assign), 0, {}};
   FitSample(M, rows, energy, residual, fit, nullptr);
@@ -239,7 +300,7 @@ void LpcaSampler::FitSample(const Mat& M, const std::vector<std::size_t>& rows, 
   }
   double res = 0;
   for (const PcaResult& p : f.pca) res += p.residual_energy;
-  f.error = energy > 0 ? std::sqrt(res / energy) : 0;
+  f.error = energy > 0 ? std::sqrt((res + outside_) / energy) : 0;
   f.members = std::move(members);
 }
 
@@ -366,6 +427,10 @@ RowMatrixXf LpcaSampler::SeedCenters(const Mat& M, const std::vector<std::size_t
   return centers;
 }
 
+template SampleSubspace LpcaSampler::Subspace(const TexelMatrix::HalfMatrix&, const double*,
+                                              const std::vector<std::size_t>&, int) const;
+template SampleSubspace LpcaSampler::Subspace(const RowMatrixXf&, const double*, const std::vector<std::size_t>&,
+                                              int) const;
 template int LpcaSampler::Lloyd(const TexelMatrix::HalfMatrix&, const double*, const std::vector<std::size_t>&,
                                 std::mt19937_64&, std::vector<std::int32_t>&) const;
 template int LpcaSampler::Lloyd(const RowMatrixXf&, const double*, const std::vector<std::size_t>&, std::mt19937_64&,

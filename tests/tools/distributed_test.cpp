@@ -154,12 +154,16 @@ TEST(Distributed, PcaViewCodecIsTheSameForOneToFourRanks) {
 
 // btf-compress --method lpca: ranks own disjoint texel blocks. 48 x 48 texels are 9 blocks of
 // 256 texels (the last one shorter), split unevenly over 2-4 ranks; the k-means sample is every
-// texel (fewer than 8192).
+// texel (fewer than 8192), its rounds in the full dimension (108 values: below 2 x the default
+// subspace) and in a subspace of 16.
 TEST(Distributed, LpcaCodecIsTheSameForOneToFourRanks) {
   REQUIRE_MPI();
   const fs::path dir = test::TempDir();
   const std::string in = SynthInput(dir, " btf --views 0-5 --lights 0-5 --resolution 48 --samples 1");
-  ExpectCompressionIndependentOfRanks(in, " --method lpca --clusters 6 --components 3 --seed 3", dir);
+  for (const std::string subspace : {"", " --lpca-subspace 16"}) {
+    SCOPED_TRACE(subspace);
+    ExpectCompressionIndependentOfRanks(in, " --method lpca --clusters 6 --components 3 --seed 3" + subspace, dir);
+  }
 }
 
 // btf-compress --method fmf: the randomised SVD's passes are split over view slots (13 over 1-4

@@ -156,6 +156,9 @@ int main(int argc, char** argv) {
                  "LPCA: texels of the k-means sample; smaller than the texels: local-PCA rounds on it first");
   app.add_option("--lpca-splits", co.lpca.splits,
                  "LPCA: split/merge trials on the sample after its rounds, at most (0: none)");
+  app.add_option("--lpca-subspace", co.lpca.subspace,
+                 "LPCA: dimensions of the sample's principal subspace that k-means and the sample rounds work in "
+                 "(0: the full dimension)");
   app.add_option("--storage", cf.storage, "Coefficient storage: float (float32) or half (float16, half the size)");
   app.add_option("--scene", cf.scene, "scene.json: keep only the directions, mip level and channels a scene uses");
   app.add_option("-o,--output", cf.output, "Output codec file (.h5)");
