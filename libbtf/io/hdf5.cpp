@@ -376,59 +376,80 @@ namespace {
 constexpr hsize_t kCompactBytes = 32 << 10;
 constexpr hsize_t kChunkBytes = hsize_t(1) << 28;
 
-// Layout of a whole array of `dims` with elements of `element` bytes, given no chunk shape.
-void ChecksummedLayout(hid_t dcpl, const std::vector<hsize_t>& dims, std::size_t element) {
+// Layout of a whole array of `dims` with elements of `element` bytes, given no chunk shape; true
+// when it is one chunk holding the whole array.
+bool ChecksummedLayout(hid_t dcpl, const std::vector<hsize_t>& dims, std::size_t element) {
   hsize_t bytes = element;
   for (const hsize_t d : dims) bytes *= d;
-  if (bytes == 0) return;  // nothing stored
+  if (bytes == 0) return false;  // nothing stored
   if (bytes <= kCompactBytes) {
     H5Pset_layout(dcpl, H5D_COMPACT);
-    return;
+    return false;
   }
   std::vector<hsize_t> chunk = dims;  // whole trailing dimensions, as many leading rows as fit
   chunk[0] = std::max<hsize_t>(1, std::min<hsize_t>(dims[0], kChunkBytes / std::max<hsize_t>(1, bytes / dims[0])));
   H5Pset_chunk(dcpl, static_cast<int>(chunk.size()), chunk.data());
   H5Pset_fletcher32(dcpl);
+  return chunk[0] == dims[0];
+}
+
+// Writes the one chunk of `ds` (a ChecksummedLayout of `bytes` in one chunk, stored as it is in
+// memory) as HDF5's pipeline would store it, the data followed by its Fletcher-32 checksum
+// (little-endian), with H5Dwrite_chunk from `scratch`. The pipeline copies the chunk twice into
+// buffers it allocates for each dataset (the chunk cache's and the fletcher32 filter's): fresh
+// pages for every codec slot in a process whose allocator has not grown yet (the Python module's
+// first libbtf.compress, docs/performance.md).
+bool WriteOneChunk(hid_t ds, const void* data, hsize_t bytes, std::size_t rank, std::vector<std::uint8_t>& scratch) {
+  scratch.resize(bytes + 4);
+  std::memcpy(scratch.data(), data, bytes);
+  const std::uint32_t sum = Fletcher32(scratch.data(), bytes);
+  std::memcpy(scratch.data() + bytes, &sum, 4);  // little-endian (raw_chunks.cpp asserts the host is)
+  const std::vector<hsize_t> origin(rank, 0);
+  return H5Dwrite_chunk(ds, H5P_DEFAULT, 0, origin.data(), bytes + 4, scratch.data()) >= 0;
 }
 
 void WriteWhole(const File& f, const std::string& name, const std::vector<hsize_t>& dims, hid_t file_type,
-                hid_t mem_type, const void* data, const std::vector<hsize_t>& chunk = {}) {
+                hid_t mem_type, const void* data, std::vector<std::uint8_t>& scratch,
+                const std::vector<hsize_t>& chunk = {}) {
   Handle space(H5Screate_simple(static_cast<int>(dims.size()), dims.data(), nullptr));
   Handle dcpl(H5Pcreate(H5P_DATASET_CREATE));
+  bool one_chunk = false;
   if (!chunk.empty()) {
     H5Pset_chunk(dcpl.id(), static_cast<int>(chunk.size()), chunk.data());
     H5Pset_shuffle(dcpl.id());
     H5Pset_deflate(dcpl.id(), 4);
     H5Pset_fletcher32(dcpl.id());  // a damaged or truncated chunk is refused, never read as zeros
   } else if (!dims.empty()) {
-    ChecksummedLayout(dcpl.id(), dims, H5Tget_size(file_type));
+    one_chunk = ChecksummedLayout(dcpl.id(), dims, H5Tget_size(file_type)) && H5Tequal(file_type, mem_type) > 0;
   }
   Handle ds(H5Dcreate2(f.id(), name.c_str(), file_type, space.id(), H5P_DEFAULT, dcpl.id(), H5P_DEFAULT));
-  if (!ds.valid() || H5Dwrite(ds.id(), mem_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, data) < 0)
-    ThrowIo("'{}': cannot write dataset '{}' (disk full?)", f.path(), name);
+  const bool written =
+      ds.valid() && (one_chunk ? WriteOneChunk(ds.id(), data, Elements(dims) * H5Tget_size(file_type), dims.size(), scratch)
+                               : H5Dwrite(ds.id(), mem_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, data) >= 0);
+  if (!written) ThrowIo("'{}': cannot write dataset '{}' (disk full?)", f.path(), name);
 }
 }  // namespace
 
 void File::WriteDoubles(const std::string& name, const std::vector<hsize_t>& dims, const double* data) const {
-  WriteWhole(*this, name, dims, H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, data);
+  WriteWhole(*this, name, dims, H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, data, raw_chunks_);
 }
 void File::WriteFloats(const std::string& name, const std::vector<hsize_t>& dims, const float* data, Storage storage,
                        const std::vector<hsize_t>& chunk) const {
   if (storage == Storage::kFloat16) {
     const auto half = ToHalf(data, Elements(dims));
-    WriteWhole(*this, name, dims, HalfType(), HalfType(), half.data(), chunk);
+    WriteWhole(*this, name, dims, HalfType(), HalfType(), half.data(), raw_chunks_, chunk);
   } else {
-    WriteWhole(*this, name, dims, H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, data, chunk);
+    WriteWhole(*this, name, dims, H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, data, raw_chunks_, chunk);
   }
 }
 void File::WriteInts(const std::string& name, const std::vector<hsize_t>& dims, const std::int32_t* data) const {
-  WriteWhole(*this, name, dims, H5T_STD_I32LE, H5T_NATIVE_INT32, data);
+  WriteWhole(*this, name, dims, H5T_STD_I32LE, H5T_NATIVE_INT32, data, raw_chunks_);
 }
 
 void File::WriteCodes(const std::string& name, const std::vector<hsize_t>& dims, const std::uint16_t* data,
                       int bits) const {
   if (bits != 8 && bits != 16) ThrowUsage("codes of {} bits (8 or 16)", bits);
-  WriteWhole(*this, name, dims, bits == 8 ? H5T_STD_U8LE : H5T_STD_U16LE, H5T_NATIVE_UINT16, data);
+  WriteWhole(*this, name, dims, bits == 8 ? H5T_STD_U8LE : H5T_STD_U16LE, H5T_NATIVE_UINT16, data, raw_chunks_);
 }
 
 Handle File::OpenDataset(const std::string& name) const {

@@ -130,7 +130,7 @@ class File {
   void CloseQuietly();
   Handle file_;
   std::string path_;
-  mutable std::vector<std::uint8_t> raw_chunks_;  // ReadSlab's raw chunk bytes, reused between reads
+  mutable std::vector<std::uint8_t> raw_chunks_;  // raw chunk bytes read (ReadSlab) or written, reused
   bool created_ = false;  // made by Create(): its content may be discarded on a failed close
   std::uint64_t failed_closes_at_create_ = 0;
 };

@@ -132,6 +132,75 @@ TEST(RawChunks, StoredChecksumIsHdf5sFletcher32OfTheChunk) {
   EXPECT_EQ(h5::Fletcher32(text, 5), 0x4ff029c7u);
 }
 
+// File::WriteFloats / WriteDoubles / WriteInts store an array above the compact size in one chunk
+// written with H5Dwrite_chunk and a checksum computed here: the file must hold the bytes HDF5's own
+// pipeline (H5Dwrite through the fletcher32 filter) stores for the same array, read back through
+// that pipeline with the checksum verified, and a damaged byte must be refused.
+TEST(RawChunks, OneChunkWritesStoreWhatHdf5sPipelineStores) {
+  const auto dir = test::TempDir();
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> uni(-2, 2);
+  std::vector<float> values(3 * 5001);  // 60,012 bytes: above the compact layout's 32 KiB
+  for (float& v : values) v = uni(rng);
+  const std::vector<hsize_t> dims{3, 5001};
+  {
+    h5::File f = h5::File::Create(dir / "ours.h5");
+    f.WriteFloats("x", dims, values.data());
+    f.Close();
+  }
+  {  // the same layout through HDF5's pipeline
+    h5::File f = h5::File::Create(dir / "hdf5.h5");
+    h5::Handle space(H5Screate_simple(2, dims.data(), nullptr));
+    h5::Handle dcpl(H5Pcreate(H5P_DATASET_CREATE));
+    ASSERT_GE(H5Pset_chunk(dcpl.id(), 2, dims.data()), 0);
+    ASSERT_GE(H5Pset_fletcher32(dcpl.id()), 0);
+    h5::Handle ds(H5Dcreate2(f.id(), "x", H5T_IEEE_F32LE, space.id(), H5P_DEFAULT, dcpl.id(), H5P_DEFAULT));
+    ASSERT_GE(H5Dwrite(ds.id(), H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, values.data()), 0);
+    ds.reset();
+    f.Close();
+  }
+  auto raw_chunk = [](const std::filesystem::path& path) {
+    const h5::File f = h5::File::Open(path);
+    h5::Handle ds(H5Dopen2(f.id(), "x", H5P_DEFAULT));
+    const hsize_t at[2] = {0, 0};
+    hsize_t size = 0;
+    EXPECT_GE(H5Dget_chunk_storage_size(ds.id(), at, &size), 0);
+    std::vector<std::uint8_t> raw(size);
+    std::uint32_t mask = 1;
+    EXPECT_GE(H5Dread_chunk(ds.id(), H5P_DEFAULT, at, &mask, raw.data()), 0);
+    EXPECT_EQ(mask, 0u);  // every filter applied
+    return raw;
+  };
+  const std::vector<std::uint8_t> ours = raw_chunk(dir / "ours.h5");
+  EXPECT_EQ(ours.size(), values.size() * 4 + 4);
+  EXPECT_EQ(ours, raw_chunk(dir / "hdf5.h5"));
+  // Read back through the pipeline (the filter verifies the checksum).
+  std::vector<float> back(values.size());
+  {
+    const h5::File f = h5::File::Open(dir / "ours.h5");
+    h5::Handle ds(H5Dopen2(f.id(), "x", H5P_DEFAULT));
+    ASSERT_GE(H5Dread(ds.id(), H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, back.data()), 0);
+  }
+  EXPECT_EQ(back, values);
+  // One value's byte flipped in the file: the checksum refuses the chunk.
+  std::string bytes;
+  {
+    std::ifstream in(dir / "ours.h5", std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  std::string needle(reinterpret_cast<const char*>(values.data() + 1000), 16);
+  const std::size_t at = bytes.find(needle);
+  ASSERT_NE(at, std::string::npos);
+  bytes[at] = char(bytes[at] ^ 0x20);
+  {
+    std::ofstream out(dir / "damaged.h5", std::ios::binary);
+    out << bytes;
+  }
+  const h5::File f = h5::File::Open(dir / "damaged.h5");
+  h5::Handle ds(H5Dopen2(f.id(), "x", H5P_DEFAULT));
+  EXPECT_LT(H5Dread(ds.id(), H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, back.data()), 0);
+}
+
 // HDF5's loop, word by word in 32-bit sums folded every 360 words, against the blocked sums
 // Fletcher32 forms: equal on random bytes of every length around the block size and on all-0xff
 // bytes (the largest sums).
