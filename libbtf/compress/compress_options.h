@@ -41,10 +41,11 @@ struct LpcaOptions {
   // by min_improvement). 0: none.
   int splits = 4;
   // k-means and the sample rounds work in the sample's principal subspace of this many dimensions
-  // (a PCA of an evenly spread subset of 2 subspace sample texels; each texel's energy outside it
-  // is carried as a constant), and their models are lifted back for the rounds over every texel,
+  // (a PCA of 2 subspace sample texels drawn with the seed; each texel's energy outside it is
+  // carried as a constant), and their models are lifted back for the rounds over every texel,
   // which then fit the full dimension. Used where 2 subspace <= min(d, sample); 0: never (the
-  // sample rounds in the full dimension, d = V L C).
+  // sample rounds in the full dimension, d = V L C). 128: on the 64² twill 1.70-1.95 s against
+  // 8.25 s at a lower error (docs/performance.md, "LPCA").
   int subspace = 128;
   // Per-cluster decomposition: Gram matrix of the smaller side (double) when min(n, d) <= this,
   // randomized SVD (c + 10 oversampling, 2 power iterations) otherwise. 256: the measured

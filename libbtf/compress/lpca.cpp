@@ -59,8 +59,9 @@ class LpcaRun : public LpcaPhase {
   // order) until no sample texel moves, the k-means objective improves by less than
   // kLloydTolerance (relative) or kLloydRounds. Then local-PCA rounds and split/merge steps on the
   // sample alone (SampleRounds; the sample is every texel when there are no more than
-  // lpca_sample), every texel to the cluster whose sample model reconstructs it best, and the
-  // first per-cluster PCA of all texels.
+  // lpca_sample), all in the sample's principal subspace where LpcaOptions::subspace applies (the
+  // models then lifted to the full dimension), every texel to the cluster whose sample model
+  // reconstructs it best, and the first per-cluster PCA of all texels.
   ClusterFit InitialClustering() {
     std::mt19937_64 rng(o_.seed);
     const LpcaSampler sampler(setup_, K_);
@@ -69,8 +70,10 @@ class LpcaRun : public LpcaPhase {
     int rounds = 0;
     std::vector<PcaResult> models;  // the sample rounds' per-cluster models (no scores)
     std::vector<double> sample_errors, split_errors;
-    // Phases: kmeans (the sample, seeds and Lloyd; on ranks other than 0 also the wait for rank 0's
-    // sample rounds), sample_rounds, first_fit (the first assignment of all texels and their PCA).
+    // Phases: subspace (where LpcaOptions::subspace applies: the sample's coordinates, in which
+    // k-means and the sample rounds then run), kmeans (the sample, seeds and Lloyd; on ranks other
+    // than 0 also the wait for rank 0's sample rounds), sample_rounds, first_fit (the first
+    // assignment of all texels and their PCA).
     Timer t;
     double kmeans_s = 0, subspace_s = 0;
     auto on_sample = [&](const auto& M, const double* norms, const std::vector<std::size_t>& rows) {

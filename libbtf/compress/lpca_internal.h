@@ -309,8 +309,8 @@ class LpcaRows : public LpcaPhase {
   double total_ = 0;                 // their sum
 };
 
-// The sample's principal subspace (LpcaOptions::subspace): the PCA of an evenly spread subset of
-// the sample's rows (mean mu, basis W: r x d, orthonormal rows) and each sample row's coordinates
+// The sample's principal subspace (LpcaOptions::subspace): the PCA of some of the sample's rows
+// (mean mu, basis W: r x d, orthonormal rows) and each sample row's coordinates
 // z = W (x - mu). A cluster model (mean m, basis E) in those coordinates is the model mu + W^T m,
 // E W of the full rows, and a row's squared residual under it is the coordinates' residual plus
 // ||x - mu||^2 - ||z||^2, the row's energy outside the subspace, the same under every such model.
