@@ -81,8 +81,8 @@ class LpcaRun : public LpcaPhase {
       const int dims = o_.lpca.subspace;
       if (dims > 0 && 2 * std::size_t(dims) <= std::min(d_, rows.size())) {
         const SampleSubspace sub = sampler.Subspace(M, norms, rows, dims);
-        subspace_s = t.Seconds();
-        if (sub.pca.components() > 0) {
+        if (sub.pca.components() > 0) {  // else no centred energy: the full dimension
+          subspace_s = t.Seconds();
           LpcaSampler inner({setup_.ctx, setup_.sum, N_, std::size_t(sub.pca.components())}, K_);
           inner.SetOutside(sub.outside, sub.energy);
           std::vector<std::size_t> index(rows.size());

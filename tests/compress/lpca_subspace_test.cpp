@@ -80,6 +80,19 @@ TEST(LpcaSubspace, SampleErrorsCountTheEnergyOutsideTheSubspace) {
                                                 sub.iteration_errors.front(), sub.relative_error, full.relative_error));
 }
 
+// Texels that are all the same ABRDF leave the sample no centred energy, so no subspace: the
+// sample rounds run in the full dimension and the codec is exact (float rounding).
+TEST(LpcaSubspace, ConstantDataFallsBackToTheFullDimension) {
+  Dataset d = ThreeMaterials();
+  const std::vector<float> first = d.Abrdf(0, 0);
+  for (int y = 0; y < 24; ++y)
+    for (int x = 0; x < 24; ++x) d.SetAbrdf(y, x, first);
+  CompressSummary s;
+  test::CompressDataset(d, Lpca(3, 2, 16), &s);
+  EXPECT_FALSE(s.times.ToJson().contains("subspace"));
+  EXPECT_LT(s.relative_error, 1e-6);
+}
+
 // The subspace's PCA runs single-threaded and its coordinates in fixed blocks: the codec is the
 // same bits with one and two threads.
 TEST(LpcaSubspace, CodecIsIndependentOfTheThreadCount) {
