@@ -20,6 +20,25 @@ pkg_check_modules(LIBDEFLATE REQUIRED IMPORTED_TARGET libdeflate)
 # this target from its properties (cmake/BtfPackage.cmake) rather than running FindHDF5 again.
 set(HDF5_PREFER_PARALLEL OFF)
 find_package(HDF5 REQUIRED COMPONENTS C)
+# The tools that are executables linking libbtf (tools/CMakeLists.txt) link HDF5's static archive
+# (libhdf5-dev ships it): the shared library's own dependencies, libcurl and some 30 libraries for
+# a remote-file driver libbtf never uses, cost every start of a program ~16 ms (docs/performance.md,
+# "Tool start-up"). The archive pulls only the drivers and filters libbtf calls, which need szip,
+# zlib and libm. Off, or without the archive: the shared library, as for everything else.
+option(BTF_TOOLS_STATIC_HDF5 "Tools link HDF5's static archive (libhdf5.a) when it is installed" ON)
+set(BTF_HDF5_STATIC_LIBS "")
+if(BTF_TOOLS_STATIC_HDF5 AND HDF5_C_LIBRARY_hdf5)
+  get_filename_component(dir "${HDF5_C_LIBRARY_hdf5}" DIRECTORY)
+  find_file(BTF_HDF5_STATIC_ARCHIVE libhdf5.a HINTS "${dir}" NO_DEFAULT_PATH)
+  if(BTF_HDF5_STATIC_ARCHIVE)
+    set(BTF_HDF5_STATIC_LIBS ${BTF_HDF5_STATIC_ARCHIVE} ${HDF5_C_LIBRARY_sz} ${HDF5_C_LIBRARY_z} ${CMAKE_DL_LIBS} m)
+    add_library(btf_hdf5_static INTERFACE)  # hdf5::hdf5's headers and definitions, the archive's link
+    target_include_directories(btf_hdf5_static INTERFACE $<TARGET_PROPERTY:hdf5::hdf5,INTERFACE_INCLUDE_DIRECTORIES>)
+    target_compile_definitions(btf_hdf5_static INTERFACE $<TARGET_PROPERTY:hdf5::hdf5,INTERFACE_COMPILE_DEFINITIONS>)
+    target_link_libraries(btf_hdf5_static INTERFACE ${BTF_HDF5_STATIC_LIBS})
+  endif()
+endif()
+message(STATUS "libbtf: tools link HDF5 statically: ${BTF_HDF5_STATIC_LIBS}")
 # MPI (Open MPI from Debian: libopenmpi-dev, openmpi-bin) for distributed runs (docs/scaling.md);
 # optional: without it every tool runs as one process.
 option(BTF_WITH_MPI "Distributed runs over MPI when MPI is found" ON)

@@ -126,6 +126,7 @@ class LpcaRun : public LpcaPhase {
       }
     }
     if (kmeans_s == 0) kmeans_s = t.Seconds();
+    ReleaseFreeHeap();  // the sample's working arrays (core/memory.h)
     if (subspace_s > 0) sum_.times.Add("subspace", subspace_s);
     sum_.times.Add("kmeans", kmeans_s - subspace_s);
     sum_.times.Add("sample_rounds", t.Seconds() - kmeans_s);
@@ -133,7 +134,7 @@ class LpcaRun : public LpcaPhase {
     ClusterFit fit;
     fit.assign.assign(N_, 0);
     fitter_.Reassign(models, fit.assign);
-    fitter_.FitClusters(fit, true, nullptr, &models);
+    fitter_.FitClusters(fit, true, nullptr, &models, true);  // the sample's models, freed as they start fits
     sum_.times.Add("first_fit", t.Seconds());
     sum_.sample_errors = sample_errors;
     sum_.split_errors = split_errors;

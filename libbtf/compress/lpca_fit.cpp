@@ -81,18 +81,22 @@ PcaResult UnpackPca(const std::vector<std::uint8_t>& bytes) {
   return p;
 }
 
-void LpcaFitter::FitClusters(ClusterFit& f, bool have_residuals, const ClusterFit* prev, const std::vector<PcaResult>* warm) {
+std::vector<int> LpcaFitter::FitClusters(ClusterFit& f, bool have_residuals, ClusterFit* prev,
+                                         std::vector<PcaResult>* warm, bool release_warm) {
   std::vector<std::vector<std::size_t>> members = MembersFillingEmpty(f.assign, K_, have_residuals ? residual_.data() : nullptr);
   f.pca.assign(static_cast<std::size_t>(K_), PcaResult{});
   // Largest first (one cluster per thread, Eigen single-threaded inside the region); the
   // clusters that keep prev's PCA are left out.
-  std::vector<int> order_k;
+  std::vector<int> order_k, kept;
   for (int k = 0; k < K_; ++k) {
     const auto& m = members[static_cast<std::size_t>(k)];
-    if (prev && !m.empty() && prev->members.size() == members.size() && prev->members[static_cast<std::size_t>(k)] == m)
-      f.pca[static_cast<std::size_t>(k)] = prev->pca[static_cast<std::size_t>(k)];
-    else
+    if (prev && !m.empty() && prev->members.size() == members.size() &&
+        prev->members[static_cast<std::size_t>(k)] == m) {
+      f.pca[static_cast<std::size_t>(k)] = std::move(prev->pca[static_cast<std::size_t>(k)]);
+      kept.push_back(k);
+    } else {
       order_k.push_back(k);
+    }
   }
   std::stable_sort(order_k.begin(), order_k.end(), [&](int a, int b) {
     return members[static_cast<std::size_t>(a)].size() > members[static_cast<std::size_t>(b)].size();
@@ -102,7 +106,7 @@ void LpcaFitter::FitClusters(ClusterFit& f, bool have_residuals, const ClusterFi
   for (std::size_t w = 0; w < p.waves; ++w) {
     if (rows_.ooc_) rows_.ReadClusterRows(members, p.owned[0], w ? p.wave_end[w - 1] : 0, p.wave_end[w], X);
     if (R_ > 1) GatherWaveRows(p, members, w, X);
-    FitWave(p, members, w, warm, X, f);
+    FitWave(p, members, w, warm, release_warm, X, f);
   }
   if (R_ > 1)  // every rank gets every cluster's model (and scores, for the codec)
     for (int k : order_k) {
@@ -116,6 +120,8 @@ void LpcaFitter::FitClusters(ClusterFit& f, bool have_residuals, const ClusterFi
   for (const PcaResult& p : f.pca) res += p.residual_energy;
   f.error = rows_.total_ > 0 ? std::sqrt(res / rows_.total_) : 0;
   f.members = std::move(members);
+  ReleaseFreeHeap();  // the fits' working arrays, freed between the models they kept
+  return kept;
 }
 
 LpcaFitter::WavePlan LpcaFitter::PlanWaves(const std::vector<std::vector<std::size_t>>& members,
@@ -195,12 +201,14 @@ void LpcaFitter::GatherWaveRows(const WavePlan& p, const std::vector<std::vector
 }
 
 void LpcaFitter::FitWave(const WavePlan& p, const std::vector<std::vector<std::size_t>>& members, std::size_t w,
-                         const std::vector<PcaResult>* warm, std::vector<RowMatrixXf>& X, ClusterFit& f) const {
+                         std::vector<PcaResult>* warm, bool release_warm, std::vector<RowMatrixXf>& X,
+                         ClusterFit& f) const {
   // Each cluster's PCA is computed by one thread alone (Eigen single-threaded inside the
   // region) and the residuals are summed in cluster order: the result does not depend on
   // which thread or rank took which cluster.
   const auto& list = p.owned[static_cast<std::size_t>(rank_)];
   const std::size_t last = std::min(list.size(), p.wave_end[w]), first = std::min(last, w ? p.wave_end[w - 1] : 0);
+  ThreadPageBuffers scratch;  // each thread's block of rows for the randomized path
 #pragma omp parallel for schedule(dynamic, 1)
   for (std::ptrdiff_t kk = std::ptrdiff_t(first); kk < std::ptrdiff_t(last); ++kk) {
     omp_set_num_threads(1);  // Eigen sequential in this cluster's task
@@ -208,12 +216,18 @@ void LpcaFitter::FitWave(const WavePlan& p, const std::vector<std::vector<std::s
     const auto& m = members[static_cast<std::size_t>(k)];
     const PcaRequest q = MakeRequest(o_, std::uint64_t(k));
     if (R_ == 1 && !rows_.ooc_) {  // in core, one process: the rows come from rows_.A_ a block at a time
-      const PcaRows rows{static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d_),
-                         [&](Eigen::Index first, Eigen::Index count, float* out) {
-                           for (Eigen::Index i = 0; i < count; ++i)
-                             rows_.A_.CopyRow(m[std::size_t(first + i)], out + std::size_t(i) * d_);
-                         }};
+      PcaRows rows{static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d_),
+                   [&](Eigen::Index first, Eigen::Index count, float* out) {
+                     for (Eigen::Index i = 0; i < count; ++i)
+                       rows_.A_.CopyRow(m[std::size_t(first + i)], out + std::size_t(i) * d_);
+                   },
+                   [&](Eigen::Index c0, Eigen::Index w, float* out, Eigen::Index stride) {
+                     for (std::size_t i = 0; i < m.size(); ++i)
+                       rows_.A_.CopyRowPart(m[i], std::size_t(c0), std::size_t(w), out + i * std::size_t(stride));
+                   }};
+      rows.block = scratch.Get<float>(std::size_t(kPcaBlockRows) * d_);
       f.pca[static_cast<std::size_t>(k)] = Pca(rows, q, WarmStart(o_.lpca.warm_start, warm, k));
+      if (release_warm) (*warm)[static_cast<std::size_t>(k)] = PcaResult();  // this thread's cluster alone
       continue;
     }
     RowMatrixXf& x = X[static_cast<std::size_t>(k)];
@@ -221,6 +235,7 @@ void LpcaFitter::FitWave(const WavePlan& p, const std::vector<std::vector<std::s
     for (std::size_t i = 0; i < m.size() && !rows_.ooc_; ++i)
       if (m[i] >= rows_.t0_ && m[i] < rows_.t1_) rows_.A_.CopyRow(m[i] - rows_.t0_, x.row(Eigen::Index(i)).data());
     f.pca[static_cast<std::size_t>(k)] = Pca(x, q, WarmStart(o_.lpca.warm_start, warm, k));
+    if (release_warm) (*warm)[static_cast<std::size_t>(k)] = PcaResult();
     x.resize(0, 0);
   }
 }
@@ -232,21 +247,20 @@ std::size_t LpcaFitter::Reassign(const std::vector<PcaResult>& pca, std::vector<
   const std::vector<int> fitted = Fitted(pca);
   std::vector<std::uint8_t> changed(N_, 0);
   std::vector<std::uint32_t> compared(N_, 0);
+  ThreadPageBuffers scratch;
   rows_.ForChunks([&] { rows_.A_.Visit([&](const auto& M) { ForBlocks(rows_.local(), [&](std::size_t b, std::size_t count) {
     const std::size_t t = rows_.t0_ + b;  // the block's first texel
     std::vector<std::vector<int>> candidates;
     if (!sketch_.bounds.empty()) {
-      if (build) {
-        RowMatrixXf X;
-        rows_.A_.Rows(b, count, X);
-        sketch_.Project(X, t);
-      }
+      for (std::size_t i = 0; build && i < count; i += kProjectRows)
+        sketch_.Project(rows_.A_.Rows(b + i, std::min(kProjectRows, count - i), scratch), t + i);
       sketch_.Candidates(t, count, rows_.norms_.data() + t, candidates);
     }
     BestClusters(M, [&](std::size_t i) { return Eigen::Index(b + i); }, count, pca, fitted,
                  sketch_.bounds.empty() ? nullptr : &candidates, assign.data() + t, residual_.data() + t, changed.data() + t,
                  compared.data() + t);
   }); }); });
+  if (build) sketch_.bounds.EndProjections();  // every texel's g and e are in
   // Mean clusters compared per texel (this rank's texels; the sum of integers is exact).
   std::uint64_t pairs = std::accumulate(compared.begin(), compared.end(), std::uint64_t(0));
   if (R_ > 1) {
@@ -269,6 +283,7 @@ std::size_t LpcaFitter::Reassign(const std::vector<PcaResult>& pca, std::vector<
              changed.begin(), changed.end(), std::uint64_t(0))}))
       moved += m;
   }
+  ReleaseFreeHeap();  // the reassignment's working arrays
   return static_cast<std::size_t>(moved);
 }
 
@@ -278,13 +293,17 @@ void LpcaFitter::Iterate(ClusterFit& fit) {
     ClusterFit next{{}, fit.assign, 0, {}};
     const std::size_t moved = Reassign(fit.pca, next.assign);
     if (moved == 0) break;
-    FitClusters(next, true, &fit, &fit.pca);
+    const std::vector<int> kept = FitClusters(next, true, &fit, &fit.pca);  // kept: moved from fit
     sum_.iteration_errors.push_back(next.error);
     sum_.iteration_changes.push_back(static_cast<int>(moved));
     rep_.Info("lpca: iteration {}: {} texels reassigned, relative error {:.5f}", it + 1, moved, next.error);
     const bool better = next.error < fit.error;
     const bool enough = fit.error - next.error >= o_.lpca.min_improvement * fit.error;
-    if (better) fit = std::move(next);
+    if (better) {
+      fit = std::move(next);
+    } else {
+      for (int k : kept) fit.pca[std::size_t(k)] = std::move(next.pca[std::size_t(k)]);
+    }
     if (!enough) break;
   }
   rep_.Progress(std::size_t(o_.lpca.max_iterations), std::size_t(o_.lpca.max_iterations), "lpca");  // converged

@@ -24,6 +24,7 @@
 
 #include "libbtf/compress/lpca_reassign.h"
 #include "libbtf/compress/method.h"
+#include "libbtf/core/error.h"
 #include "libbtf/core/memory.h"
 #include "libbtf/io/half.h"
 
@@ -31,10 +32,29 @@ namespace btf::lpca {
 
 inline constexpr std::size_t kRows = 256;  // texels per GEMM block (assignment, reassignment)
 inline constexpr std::size_t kTile = 64;   // texels per transpose tile (LpcaRows::ReadRows)
+// Texels per sketch projection GEMM (a part of a kRows block: the float rows it converts are a
+// thread's largest buffer, 5 MB at the Bonn size's d = 19683, not 20).
+inline constexpr std::size_t kProjectRows = 64;
 // The reassignment sketch's span: each cluster's mean and its first basis row. On the 64^2
 // twill (k = 32, c = 8): 4.2 / 2.2 / 1.35 clusters compared per texel with 0 / 1 / 3 rows, for a
 // sketch of 32 / 64 / 128 dimensions (its cost, once: two GEMMs of that width).
 inline constexpr int kSketchBasisRows = 1;
+
+// One PageBuffer (core/memory.h) per thread of the OpenMP team that a parallel region started
+// by the constructing thread gets: Get() from inside the region returns the calling thread's.
+class ThreadPageBuffers {
+ public:
+  ThreadPageBuffers() : buffers_(std::size_t(std::max(1, omp_get_max_threads()))) {}
+  template <typename T>
+  T* Get(std::size_t n) {
+    const std::size_t t = std::size_t(omp_get_thread_num());
+    BTF_CHECK(t < buffers_.size());
+    return buffers_[t].Get<T>(n);
+  }
+
+ private:
+  std::vector<PageBuffer> buffers_;
+};
 
 class TexelMatrix {
  public:
@@ -55,10 +75,20 @@ class TexelMatrix {
   std::uint16_t* HalfRow(std::size_t i) { return reinterpret_cast<std::uint16_t*>(h_.row(static_cast<Eigen::Index>(i)).data()); }
   // out[0, cols()) = row i, as float.
   void CopyRow(std::size_t i, float* out) const { CopyRows(i, 1, out); }
-  // X = rows [first, first + count), as float.
-  void Rows(std::size_t first, std::size_t count, RowMatrixXf& X) const {
-    X.resize(static_cast<Eigen::Index>(count), static_cast<Eigen::Index>(cols()));
+  // out[0, w) = row i's columns [c0, c0 + w), as float.
+  void CopyRowPart(std::size_t i, std::size_t c0, std::size_t w, float* out) const {
+    const std::size_t at = i * cols() + c0;
+    if (half_)
+      HalvesToFloats(reinterpret_cast<const std::uint16_t*>(h_.data()) + at, out, w);
+    else
+      std::copy_n(f_.data() + at, w, out);
+  }
+  // X = rows [first, first + count), as float, in the calling thread's scratch buffer.
+  Eigen::Map<RowMatrixXf> Rows(std::size_t first, std::size_t count, ThreadPageBuffers& scratch) const {
+    Eigen::Map<RowMatrixXf> X(scratch.Get<float>(count * cols()), static_cast<Eigen::Index>(count),
+                              static_cast<Eigen::Index>(cols()));
     CopyRows(first, count, X.data());
+    return X;
   }
   template <typename F>
   decltype(auto) Visit(F&& f) const { return half_ ? f(h_) : f(f_); }
@@ -103,7 +133,9 @@ struct Sketch {
       : bounds(pca, d, kSketchBasisRows), g(rows * std::size_t(bounds.dims())), e(rows) {}
   std::size_t dims() const { return std::size_t(bounds.dims()); }
   // Rows [first, first + X.rows()) from their values X.
-  void Project(const RowMatrixXf& X, std::size_t first) { bounds.Project(X, g.data() + first * dims(), e.data() + first); }
+  void Project(const Eigen::Ref<const RowMatrixXf>& X, std::size_t first) {
+    bounds.Project(X, g.data() + first * dims(), e.data() + first);
+  }
   // Candidates of rows [first, first + count) (norm2: their squared norms).
   void Candidates(std::size_t first, std::size_t count, const double* norm2, std::vector<std::vector<int>>& out) const {
     bounds.Candidates(g.data() + first * dims(), e.data() + first, norm2, count, out);
@@ -141,14 +173,23 @@ inline void ForBlocks(std::size_t m, F&& f) {
   }
 }
 
-// P = X right^T for X = the rows rows[first, first + count) of M, gathered as float (one
-// ForBlocks block: the GEMM of a block does not depend on the thread that runs it).
+// X = the rows rows[first, first + count) of M, gathered as float into the calling thread's
+// scratch buffer.
+template <typename Mat>
+inline Eigen::Map<RowMatrixXf> GatheredRows(const Mat& M, const std::size_t* rows, std::size_t first, std::size_t count,
+                                            ThreadPageBuffers& scratch) {
+  Eigen::Map<RowMatrixXf> X(scratch.Get<float>(count * std::size_t(M.cols())), static_cast<Eigen::Index>(count),
+                            M.cols());
+  for (Eigen::Index i = 0; i < X.rows(); ++i) RowToFloat(M, static_cast<Eigen::Index>(rows[first + std::size_t(i)]), X.row(i).data());
+  return X;
+}
+
+// P = X right^T for X = GatheredRows (one ForBlocks block: the GEMM of a block does not depend
+// on the thread that runs it).
 template <typename Mat>
 inline Eigen::MatrixXf GatheredProducts(const Mat& M, const std::size_t* rows, std::size_t first, std::size_t count,
-                                        const RowMatrixXf& right) {
-  RowMatrixXf X(static_cast<Eigen::Index>(count), M.cols());
-  for (Eigen::Index i = 0; i < X.rows(); ++i) RowToFloat(M, static_cast<Eigen::Index>(rows[first + std::size_t(i)]), X.row(i).data());
-  return X * right.transpose();
+                                        const RowMatrixXf& right, ThreadPageBuffers& scratch) {
+  return GatheredRows(M, rows, first, count, scratch) * right.transpose();
 }
 
 // Each of `count` rows of M (row i: M's row at_row(i)) to the cluster that reconstructs it best
@@ -426,10 +467,12 @@ class LpcaFitter : public LpcaPhase {
       : LpcaPhase(s), rows_(rows), K_(clusters), residual_(s.N, 0.0) {}
 
   // Per-cluster PCA on the current assignment; empty clusters re-seeded from the worst texels. A
-  // cluster whose members are those it had in `prev` keeps prev's PCA (the same rows in the same
-  // order: its fit). warm (with o_.lpca.warm_start): per cluster, the model whose basis starts its
-  // PCA (Pca's `start`; none where it has no components).
-  void FitClusters(ClusterFit& f, bool have_residuals, const ClusterFit* prev, const std::vector<PcaResult>* warm);
+  // cluster whose members are those it had in `prev` takes prev's PCA (the same rows in the same
+  // order: its fit), moved, not copied: those clusters are returned, for KeepPrevious to move
+  // back. warm (with o_.lpca.warm_start): per cluster, the model whose basis starts its PCA (Pca's
+  // `start`; none where it has no components); release_warm: each freed once its cluster is fitted.
+  std::vector<int> FitClusters(ClusterFit& f, bool have_residuals, ClusterFit* prev, std::vector<PcaResult>* warm,
+                               bool release_warm = false);
 
   // Reassigns each texel to the cluster that reconstructs it best (the lowest index on ties; a
   // texel keeps its cluster if none is fitted); returns the number moved. Each texel's residual
@@ -460,7 +503,7 @@ class LpcaFitter : public LpcaPhase {
                       std::vector<RowMatrixXf>& X) const;
   // The PCA of this rank's clusters of wave w into f.pca.
   void FitWave(const WavePlan& p, const std::vector<std::vector<std::size_t>>& members, std::size_t w,
-               const std::vector<PcaResult>* warm, std::vector<RowMatrixXf>& X, ClusterFit& f) const;
+               std::vector<PcaResult>* warm, bool release_warm, std::vector<RowMatrixXf>& X, ClusterFit& f) const;
 
   LpcaRows& rows_;
   const int K_;

@@ -190,7 +190,8 @@ ReassignSketch::ReassignSketch(const std::vector<PcaResult>& clusters, std::size
   G_ = Gd_.cast<float>();
 }
 
-void ReassignSketch::Project(const RowMatrixXf& X, float* g, double* e) const {
+void ReassignSketch::Project(const Eigen::Ref<const RowMatrixXf>& X, float* g, double* e) const {
+  BTF_CHECK(G_.rows() == Gd_.rows());  // not after EndProjections
   const Eigen::Index n = X.rows(), m = G_.rows();
   Eigen::Map<RowMatrixXf> gm(g, n, m);
   gm.noalias() = X * G_.transpose();
@@ -238,7 +239,7 @@ void ReassignSketch::SetClusters(const std::vector<PcaResult>& clusters) {
 
 void ReassignSketch::Candidates(const float* g, const double* e, const double* norm2, std::size_t n,
                                 std::vector<std::vector<int>>& out) const {
-  const Eigen::Index m = G_.rows();
+  const Eigen::Index m = Gd_.rows();
   const Eigen::MatrixXd gd = Eigen::Map<const RowMatrixXf>(g, Eigen::Index(n), m).cast<double>();
   // |y - mean_k|^2 = |g|^2 - 2 g . h_k + |mean_k|^2 (y = G^T g; mean_k's part outside G adds to
   // both sides); basis_k (y - mean_k) = F_k g - v_k.

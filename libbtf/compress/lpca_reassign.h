@@ -54,11 +54,13 @@ class ReassignSketch {
   // clusters[k]: cluster k's model (mean and basis; an empty mean: an empty cluster, never a
   // candidate); per_cluster: basis rows of each cluster that enter the span with its mean.
   ReassignSketch(const std::vector<PcaResult>& clusters, std::size_t d, int per_cluster);
-  bool empty() const { return G_.rows() == 0; }
-  Eigen::Index dims() const { return G_.rows(); }
+  bool empty() const { return Gd_.rows() == 0; }
+  Eigen::Index dims() const { return Gd_.rows(); }
 
-  // For rows X (float, row-major n x d): g (n x m, row-major) and e (n).
-  void Project(const RowMatrixXf& X, float* g, double* e) const;
+  // For rows X (float, row-major n x d): g (n x m, row-major) and e (n). Not after EndProjections.
+  void Project(const Eigen::Ref<const RowMatrixXf>& X, float* g, double* e) const;
+  // Frees what only Project uses (G's float copy), once every row is projected.
+  void EndProjections() { G_.resize(0, 0); }
 
   // The cluster models the bounds refer to (recomputed per reassignment: they change every round;
   // G does not). Empty clusters get no bound.
@@ -72,7 +74,7 @@ class ReassignSketch {
 
  private:
   Eigen::MatrixXd Gd_;  // m x d, orthonormal rows
-  RowMatrixXf G_;       // the same, float (the GEMMs)
+  RowMatrixXf G_;       // the same, float (Project's GEMMs)
   // Per fitted cluster (SetClusters): H (K x m) rows G mean_k, hn_k = |G mean_k|^2 + |mean_k
   // outside G|^2, F (rows: the fitted clusters' basis rows times G^T) and v = basis mean_k.
   int K_ = 0;

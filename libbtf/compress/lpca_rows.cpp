@@ -46,22 +46,25 @@ void LpcaRows::ReadRows(const std::vector<std::size_t>& texels, const std::vecto
   // in the tiles: the slot is range-checked on its own then, so that every read of a slot
   // refuses what it holds beyond the half range, as one that covers it does.
   const bool covers = texels.size() == N_;
-  std::vector<float> buffer;  // the slot, where the source does not hold it or the log changes it
+  PageBuffer buffer;  // the slot, where the source does not hold it or the log changes it
   if (norms) std::fill(norms, norms + texels.size(), 0.0);
   const bool check_underflow = half() && sum_.lpca_passes == 0;
   double energy = 0, below_normal = 0;  // of the transformed values: all, |x| < 2^-14
   for (int v = 0; v < V; ++v) {
     rep_.Progress(std::size_t(v), std::size_t(V), "read");
     const float* slot = tr_.log() ? nullptr : in_.ViewSlotData(v);
+    float* read = nullptr;
+    std::size_t read_size = 0;
     if (!slot) {
-      buffer.resize(in_.slot_size());
-      in_.ReadViewSlot(v, buffer.data());
-      slot = buffer.data();
+      read_size = in_.slot_size();
+      read = buffer.Get<float>(read_size);
+      in_.ReadViewSlot(v, read);
+      slot = read;
     }
     // With a half matrix and no log, the range check below also finds NaN and Inf (and
     // RefuseBeyondHalf names them as CheckFiniteSlot does), so the slot is not scanned twice.
     if (tr_.log() || !half()) CheckFiniteSlot(in_, v, slot);
-    tr_.Apply(in_.name(), v, buffer.data(), buffer.size());  // (with the log, slot is the buffer)
+    tr_.Apply(in_.name(), v, read, read_size);  // (with the log, slot is the buffer)
     if (check_underflow) {
       double e = 0, b = 0;
 #pragma omp parallel for schedule(static) reduction(+ : e, b)

@@ -67,9 +67,10 @@ template <typename Mat>
 void NearestCenters(const Mat& M, const double* norms, const RowMatrixXf& centers,
                            const std::size_t* rows, std::size_t m, std::int32_t* assign, double* dist) {
   const Eigen::VectorXd cn = centers.cast<double>().rowwise().squaredNorm();
+  ThreadPageBuffers scratch;
   ForBlocks(m, [&](std::size_t first, std::size_t count) {
     const Eigen::Index w = static_cast<Eigen::Index>(count);
-    const Eigen::MatrixXf P = GatheredProducts(M, rows, first, count, centers);
+    const Eigen::MatrixXf P = GatheredProducts(M, rows, first, count, centers, scratch);
     for (Eigen::Index i = 0; i < w; ++i) {
       const std::size_t t = rows[first + std::size_t(i)];
       double best = std::numeric_limits<double>::infinity();
@@ -109,10 +110,11 @@ SampleSubspace LpcaSampler::Subspace(const Mat& M, const double* norms, const st
   pick.resize(n);
   std::sort(pick.begin(), pick.end());
   WidePcaResult w;
+  ThreadPageBuffers scratch;  // the picked rows here, then each thread's block of rows
   {
-    RowMatrixXf X(static_cast<Eigen::Index>(n), d);
-    for (std::size_t i = 0; i < n; ++i)
-      RowToFloat(M, static_cast<Eigen::Index>(rows[pick[i]]), X.row(Eigen::Index(i)).data());
+    std::vector<std::size_t> picked(n);
+    for (std::size_t i = 0; i < n; ++i) picked[i] = rows[pick[i]];
+    const auto X = GatheredRows(M, picked.data(), 0, n, scratch);
     PcaRequest q;
     q.max_components = dims;
     w = WidePca(X.data(), X.rows(), d, q);
@@ -131,7 +133,7 @@ SampleSubspace LpcaSampler::Subspace(const Mat& M, const double* norms, const st
   s.norms.resize(S);
   std::vector<double> outside(S);
   ForBlocks(S, [&](std::size_t first, std::size_t count) {
-    const Eigen::MatrixXf P = GatheredProducts(M, rows.data(), first, count, right);
+    const Eigen::MatrixXf P = GatheredProducts(M, rows.data(), first, count, right, scratch);
     for (Eigen::Index i = 0; i < P.rows(); ++i) {
       const std::size_t j = first + std::size_t(i);
       auto z = s.Z.row(static_cast<Eigen::Index>(j));
@@ -160,10 +162,10 @@ template <typename Mat>
 Sketch LpcaSampler::MakeSampleSketch(const Mat& M, const std::vector<std::size_t>& rows, const std::vector<PcaResult>& pca) const {
   Sketch s(pca, d_, rows.size());
   if (s.bounds.empty()) return s;
+  ThreadPageBuffers scratch;
   ForBlocks(rows.size(), [&](std::size_t first, std::size_t count) {
-    RowMatrixXf X(static_cast<Eigen::Index>(count), M.cols());
-    for (Eigen::Index i = 0; i < X.rows(); ++i) RowToFloat(M, static_cast<Eigen::Index>(rows[first + std::size_t(i)]), X.row(i).data());
-    s.Project(X, first);
+    for (std::size_t i = 0; i < count; i += kProjectRows)
+      s.Project(GatheredRows(M, rows.data(), first + i, std::min(kProjectRows, count - i), scratch), first + i);
   });
   return s;
 }
@@ -233,9 +235,10 @@ bool LpcaSampler::ProposeSplitMerge(const Mat& M, const double* norms, const std
   const std::size_t S = rows.size();
   std::vector<std::int32_t> alt(S);
   std::vector<double> gap(S), score(S);
+  ThreadPageBuffers scratch;
   ForBlocks(S, [&](std::size_t first, std::size_t count) {
     const Eigen::Index w = static_cast<Eigen::Index>(count);
-    const Eigen::MatrixXf P = GatheredProducts(M, rows.data(), first, count, model.big);
+    const Eigen::MatrixXf P = GatheredProducts(M, rows.data(), first, count, model.big, scratch);
     for (Eigen::Index i = 0; i < w; ++i) {
       const std::size_t s = first + std::size_t(i);
       const double norm = norms[rows[s]];
@@ -284,16 +287,22 @@ void LpcaSampler::FitSample(const Mat& M, const std::vector<std::size_t>& rows, 
   std::stable_sort(order_k.begin(), order_k.end(), [&](int a, int b) {
     return members[static_cast<std::size_t>(a)].size() > members[static_cast<std::size_t>(b)].size();
   });
+  ThreadPageBuffers scratch;  // each thread's block of rows for the randomized path
 #pragma omp parallel for schedule(dynamic, 1)
   for (std::ptrdiff_t kk = 0; kk < std::ptrdiff_t(order_k.size()); ++kk) {
     omp_set_num_threads(1);  // Eigen sequential in this cluster's task
     const int k = order_k[static_cast<std::size_t>(kk)];
     const auto& m = members[static_cast<std::size_t>(k)];
-    const PcaRows x{static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d_),
-                    [&](Eigen::Index first, Eigen::Index count, float* out) {
-                      for (Eigen::Index i = 0; i < count; ++i)
-                        RowToFloat(M, static_cast<Eigen::Index>(rows[m[std::size_t(first + i)]]), out + std::size_t(i) * d_);
-                    }};
+    PcaRows x{static_cast<Eigen::Index>(m.size()), static_cast<Eigen::Index>(d_),
+              [&](Eigen::Index first, Eigen::Index count, float* out) {
+                for (Eigen::Index i = 0; i < count; ++i)
+                  RowToFloat(M, static_cast<Eigen::Index>(rows[m[std::size_t(first + i)]]), out + std::size_t(i) * d_);
+              },
+              [&](Eigen::Index c0, Eigen::Index w, float* out, Eigen::Index stride) {
+                for (std::size_t i = 0; i < m.size(); ++i)
+                  RowToFloat(M, static_cast<Eigen::Index>(rows[m[i]]), out + i * std::size_t(stride), c0, w);
+              }};
+    x.block = scratch.Get<float>(std::size_t(kPcaBlockRows) * d_);
     PcaResult p = Pca(x, MakeRequest(o_, std::uint64_t(k)), WarmStart(o_.lpca.warm_start, prev ? &prev->pca : nullptr, k));
     p.scores.resize(0, 0);
     f.pca[static_cast<std::size_t>(k)] = std::move(p);

@@ -5,6 +5,7 @@
 #include <random>
 
 #include "libbtf/compress/gram_kernel.h"
+#include "libbtf/core/error.h"
 #include "libbtf/io/half.h"
 
 #include <Eigen/Eigenvalues>
@@ -81,17 +82,6 @@ void Center(const Eigen::Ref<const RowMatrixXf>& X, PcaResult& r, RowMatrixXf& X
   r.centered_energy = CentreRows(X, r.mean, Xc);
 }
 
-// A A^T of A's rows in double, lower triangle, summed over column blocks of kBlock.
-MatrixXd GramOfRows(const RowMatrixXf& A) {
-  MatrixXd G = MatrixXd::Zero(A.rows(), A.rows());
-  for (Eigen::Index b = 0; b < A.cols(); b += kBlock) {
-    const Eigen::Index w = std::min(kBlock, A.cols() - b);
-    const MatrixXd block = A.middleCols(b, w).cast<double>();
-    G.selfadjointView<Eigen::Lower>().rankUpdate(block);
-  }
-  return G;
-}
-
 // Number of components to keep from eigenvalues sorted in decreasing order.
 int ChooseComponents(const std::vector<double>& eig, const PcaRequest& q, double total_energy, double centered_energy,
                      int limit, int* dropped_null) {
@@ -122,31 +112,9 @@ int ChooseComponents(const std::vector<double>& eig, const PcaRequest& q, PcaRes
   return ChooseComponents(eig, q, r.total_energy, r.centered_energy, limit, &r.dropped_null);
 }
 
-// Orthonormalizes the rows of `basis` in order (Householder QR keeps the span of every prefix),
-// keeping each row's sign.
-void Orthonormalize(RowMatrixXf& basis) {
-  const Eigen::Index c = basis.rows(), d = basis.cols();
-  if (c == 0) return;
-  const MatrixXd bt = basis.transpose().cast<double>();
-  Eigen::HouseholderQR<MatrixXd> qr(bt);
-  MatrixXd q = qr.householderQ() * MatrixXd::Identity(d, c);
-  for (Eigen::Index k = 0; k < c; ++k)
-    if (q.col(k).dot(bt.col(k)) < 0) q.col(k) = -q.col(k);
-  basis = q.transpose().cast<float>();
-}
-
-// basis rows = (u_k^T Xc) / sqrt(lambda_k) for the top c eigenvectors U of Xc Xc^T.
-void BasisFromLeft(const RowMatrixXf& Xc, const MatrixXd& U, const std::vector<double>& eig, int c,
-                   PcaResult& r) {
-  Eigen::MatrixXf uc(U.rows(), c);
-  for (int k = 0; k < c; ++k) uc.col(k) = (U.col(k) / std::sqrt(eig[static_cast<std::size_t>(k)])).cast<float>();
-  r.basis.noalias() = uc.transpose() * Xc;
-  Orthonormalize(r.basis);
-}
-
-// An orthonormal basis (Householder QR, in double) of Y's columns.
-MatrixXd Orth(const MatrixXd& Y) {
-  Eigen::HouseholderQR<MatrixXd> qr(Y);
+// An orthonormal basis (Householder QR, in double) of Y's columns; Y is overwritten (the QR in place).
+MatrixXd Orth(MatrixXd& Y) {
+  const Eigen::HouseholderQR<Eigen::Ref<MatrixXd>> qr(Y);
   return qr.householderQ() * MatrixXd::Identity(Y.rows(), Y.cols());
 }
 
@@ -176,31 +144,22 @@ PcaResult NoComponents(PcaResult r, Eigen::Index n, Eigen::Index d) {
   return r;
 }
 
-// The Gram (n <= d) or covariance (n > d) path on the centred rows Xc; r holds the mean and energies.
-PcaResult GramPca(const RowMatrixXf& Xc, PcaResult r, const PcaRequest& q, int limit) {
+// The covariance path (n > d) on the centred rows Xc; r holds the mean and energies.
+PcaResult CovariancePca(const RowMatrixXf& Xc, PcaResult r, const PcaRequest& q, int limit) {
   const Eigen::Index n = Xc.rows(), d = Xc.cols();
   if (std::min(q.max_components, limit) <= 0 || r.centered_energy <= 0) return NoComponents(std::move(r), n, d);
   std::vector<double> eig;
-  if (n <= d) {
-    const MatrixXd G = GramOfRows(Xc);
-    Eigen::SelfAdjointEigenSolver<MatrixXd> es(G.selfadjointView<Eigen::Lower>());
-    const MatrixXd U = es.eigenvectors().rowwise().reverse();
-    for (Eigen::Index k = n - 1; k >= 0; --k) eig.push_back(std::max(0.0, es.eigenvalues()[k]));
-    const int c = ChooseComponents(eig, q, r, limit);
-    BasisFromLeft(Xc, U, eig, c, r);
-  } else {
-    MatrixXd C = MatrixXd::Zero(d, d);
-    for (Eigen::Index b = 0; b < n; b += kBlock) {
-      const Eigen::Index w = std::min(kBlock, n - b);
-      const MatrixXd block = Xc.middleRows(b, w).cast<double>().transpose();
-      C.selfadjointView<Eigen::Lower>().rankUpdate(block);
-    }
-    Eigen::SelfAdjointEigenSolver<MatrixXd> es(C.selfadjointView<Eigen::Lower>());
-    for (Eigen::Index k = d - 1; k >= 0; --k) eig.push_back(std::max(0.0, es.eigenvalues()[k]));
-    const int c = ChooseComponents(eig, q, r, limit);
-    r.basis.resize(c, d);
-    for (int k = 0; k < c; ++k) r.basis.row(k) = es.eigenvectors().col(d - 1 - k).cast<float>().transpose();
+  MatrixXd C = MatrixXd::Zero(d, d);
+  for (Eigen::Index b = 0; b < n; b += kBlock) {
+    const Eigen::Index w = std::min(kBlock, n - b);
+    const MatrixXd block = Xc.middleRows(b, w).cast<double>().transpose();
+    C.selfadjointView<Eigen::Lower>().rankUpdate(block);
   }
+  Eigen::SelfAdjointEigenSolver<MatrixXd> es(C.selfadjointView<Eigen::Lower>());
+  for (Eigen::Index k = d - 1; k >= 0; --k) eig.push_back(std::max(0.0, es.eigenvalues()[k]));
+  const int c = ChooseComponents(eig, q, r, limit);
+  r.basis.resize(c, d);
+  for (int k = 0; k < c; ++k) r.basis.row(k) = es.eigenvectors().col(d - 1 - k).cast<float>().transpose();
   Finish(Xc, r);
   return r;
 }
@@ -219,12 +178,13 @@ PcaResult GramPca(const RowMatrixXf& Xc, PcaResult r, const PcaRequest& q, int l
 PcaResult RandomizedPca(const PcaRows& X, PcaResult r, const PcaRequest& q, const RowMatrixXf* start, int limit) {
   const Eigen::Index n = X.rows, d = X.cols;
   constexpr Eigen::Index kRun = 8;  // rows read and shifted together, while they are in L2
-  RowMatrixXf T;
+  std::vector<float> own(X.block ? 0 : std::size_t(std::min(kPcaBlockRows, n) * d));
+  float* const block = X.block ? X.block : own.data();
   Eigen::RowVectorXf shift;  // subtracted from every row read: empty until the first block is in
   // f(first, T) for each block of rows [first, first + T.rows()), shifted as they are read.
   auto pass = [&](auto&& f) {
     for (Eigen::Index b = 0; b < n; b += kPcaBlockRows) {
-      T.resize(std::min(kPcaBlockRows, n - b), d);
+      Eigen::Map<RowMatrixXf> T(block, std::min(kPcaBlockRows, n - b), d);
       const bool shifted = shift.size() == d;
       for (Eigen::Index i = 0; i < T.rows(); i += kRun) {
         const Eigen::Index m = std::min(kRun, T.rows() - i);
@@ -252,7 +212,7 @@ PcaResult RandomizedPca(const PcaRows& X, PcaResult r, const PcaRequest& q, cons
   for (Eigen::Index j = warm_cols; j < rank; ++j)
     for (Eigen::Index i = 0; i < d; ++i) V(i, j) = normal(rng);
   Eigen::MatrixXf Yb(kPcaBlockRows, rank), Z = Eigen::MatrixXf::Zero(d, rank);
-  auto sketch = [&](Eigen::Index, const RowMatrixXf& x) {
+  auto sketch = [&](Eigen::Index, const auto& x) {
     auto y = Yb.topRows(x.rows());
     y.noalias() = x * V;
     Z.noalias() += x.transpose() * y;
@@ -260,7 +220,7 @@ PcaResult RandomizedPca(const PcaRows& X, PcaResult r, const PcaRequest& q, cons
   // Pass 1: rows x0 = x - m0; s0 = sum x0 and e0 = sum ||x0||^2 in double.
   Eigen::VectorXd s0 = Eigen::VectorXd::Zero(d);
   double e0 = 0;
-  pass([&](Eigen::Index b, const RowMatrixXf& x0) {
+  pass([&](Eigen::Index b, const auto& x0) {
     AddMoments(x0, s0, e0);
     if (want > 0) sketch(b, x0);
   });
@@ -277,8 +237,9 @@ PcaResult RandomizedPca(const PcaRows& X, PcaResult r, const PcaRequest& q, cons
     r.randomized = false;
     return NoComponents(std::move(r), n, d);
   }
-  const MatrixXd Vd = V.cast<double>();
-  const Eigen::VectorXd u = Vd.transpose() * delta, v = Vd.transpose() * s0;
+  Eigen::VectorXd u(rank), v(rank);  // V^T delta, V^T s0 (no double copy of V)
+  for (Eigen::Index j = 0; j < rank; ++j)
+    u[j] = V.col(j).cast<double>().dot(delta), v[j] = V.col(j).cast<double>().dot(s0);
   MatrixXd Zd = Z.cast<double>() - s0 * u.transpose() - delta * (v - double(n) * u).transpose();
   shift = r.mean.transpose();
   for (int it = 0; it < (warm ? q.warm_power_iterations : q.power_iterations); ++it) {
@@ -288,8 +249,9 @@ PcaResult RandomizedPca(const PcaRows& X, PcaResult r, const PcaRequest& q, cons
     Zd = Z.cast<double>();
   }
   V = Orth(Zd).cast<float>();
+  Z.resize(0, 0), Zd.resize(0, 0);
   Eigen::MatrixXf Y(n, rank);
-  pass([&](Eigen::Index b, const RowMatrixXf& xc) { Y.middleRows(b, xc.rows()).noalias() = xc * V; });
+  pass([&](Eigen::Index b, const auto& xc) { Y.middleRows(b, xc.rows()).noalias() = xc * V; });
   // Rayleigh-Ritz in span(V): Y^T Y = W Lambda W^T (double); basis^T = V W, scores = Y W.
   const MatrixXd Y64 = Y.cast<double>();
   Eigen::SelfAdjointEigenSolver<MatrixXd> es(Y64.transpose() * Y64);
@@ -305,64 +267,34 @@ PcaResult RandomizedPca(const PcaRows& X, PcaResult r, const PcaRequest& q, cons
 
 }  // namespace
 
-PcaResult Pca(const PcaRows& X, const PcaRequest& q, const RowMatrixXf* start) {
-  const Eigen::Index n = X.rows, d = X.cols;
-  PcaResult r;
-  r.requested = q.max_components;
-  // n observations span at most n - 1 centered directions.
-  const int limit = static_cast<int>(std::min<Eigen::Index>(n - 1, d));
-  r.clamped_to = limit;
-  const Eigen::Index small = std::min(n, d);
-  const int want = std::min(q.max_components, limit);
-  if (!(small <= q.gram_limit || 2 * (want + q.oversampling) >= small)) return RandomizedPca(X, std::move(r), q, start, limit);
-  RowMatrixXf Xc(n, d);  // min(n, d) <= gram_limit (or barely above the sketch): all rows at once
-  X.get(0, n, Xc.data());
-  Center(Xc, r, Xc);  // in place
-  return GramPca(Xc, std::move(r), q, limit);
-}
+namespace {
 
-PcaResult Pca(const Eigen::Ref<const RowMatrixXf>& X, const PcaRequest& q, const RowMatrixXf* start) {
-  const PcaRows rows{X.rows(), X.cols(), [&](Eigen::Index first, Eigen::Index count, float* out) {
-                       Eigen::Map<RowMatrixXf>(out, count, X.cols()) = X.middleRows(first, count);
-                     }};
-  return Pca(rows, q, start);
-}
-
-PcaResult PcaFullSvd(const Eigen::Ref<const RowMatrixXf>& X, int components) {
-  PcaResult r;
-  RowMatrixXf Xc;
-  Center(X, r, Xc);
-  r.requested = components;
-  const Eigen::MatrixXf xc = Xc;
-  Eigen::BDCSVD<Eigen::MatrixXf> svd(xc, Eigen::ComputeThinV);
-  const int c = static_cast<int>(std::min<Eigen::Index>(components, svd.nonzeroSingularValues()));
-  r.clamped_to = c;
-  r.basis = svd.matrixV().leftCols(c).transpose();
-  Finish(Xc, r);
-  return r;
-}
-
-float RoundToHalf(float x) { return HalfToFloat(FloatToHalf(x)); }
-
-void NormalizeSigns(float* basis, Eigen::Index c, Eigen::Index d, float* weights, Eigen::Index n) {
-  for (Eigen::Index k = 0; k < c; ++k) {
-    const float* row = basis + k * d;
-    if (d == 0) continue;
-    // The largest magnitude (vectorised), then the first entry that has it.
-    const float best = Eigen::Map<const Eigen::ArrayXf>(row, d).abs().maxCoeff();
-    Eigen::Index arg = 0;
-    while (arg + 1 < d && std::abs(row[arg]) != best) ++arg;
-    if (!(row[arg] < 0)) continue;
-    for (Eigen::Index i = 0; i < d; ++i) basis[k * d + i] = -basis[k * d + i];
-    for (Eigen::Index l = 0; l < n; ++l) weights[l * c + k] = -weights[l * c + k];
+// Where WidePcaOf reads X's rows, a tile of columns at a time: Load(c0, w), then Row(i) points at
+// row i's values in columns [c0, c0 + w). In memory (row stride d, read in place), or written by
+// a PcaRows' get_columns into a buffer of one tile.
+class WideTiles {
+ public:
+  WideTiles(const float* X, Eigen::Index d) : X_(X), stride_(d) {}
+  WideTiles(const PcaRows& rows)
+      : get_(&rows.get_columns), buffer_(std::size_t(rows.rows) * kWideTile), stride_(kWideTile) {}
+  void Load(Eigen::Index c0, Eigen::Index w) {
+    c0_ = c0;
+    if (get_) (*get_)(c0, w, buffer_.data(), kWideTile);
   }
-}
+  const float* Row(Eigen::Index i) const { return get_ ? buffer_.data() + i * stride_ : X_ + i * stride_ + c0_; }
 
-WidePcaResult WidePca(const float* X, Eigen::Index n, Eigen::Index d, const PcaRequest& q, bool half,
-                      const TileSink& sink, KernelIsa isa) {
-  // Tiles are row-major (n x w) like X, so loading and centring one reads X's rows contiguously
-  // (vectorised), and the kernels (gram_kernel.h) take rows of them; a tile's width is padded
-  // with zero columns to a multiple of 8, which change no sum.
+ private:
+  const float* X_ = nullptr;
+  const PcaRows::Columns* get_ = nullptr;
+  std::vector<float> buffer_;
+  Eigen::Index stride_, c0_ = 0;
+};
+
+// Tiles are row-major (n x w) like X, so loading and centring one reads X's rows contiguously
+// (vectorised), and the kernels (gram_kernel.h) take rows of them; a tile's width is padded with
+// zero columns to a multiple of 8, which change no sum.
+WidePcaResult WidePcaOf(WideTiles& X, Eigen::Index n, Eigen::Index d, const PcaRequest& q, bool half,
+                        const TileSink& sink, KernelIsa isa) {
   using TileD = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
   WidePcaResult r;
   r.mean.resize(static_cast<std::size_t>(d));
@@ -375,7 +307,7 @@ WidePcaResult WidePca(const float* X, Eigen::Index n, Eigen::Index d, const PcaR
   auto load_centred = [&](Eigen::Index c0, Eigen::Index w, double* sq) {
     const float* m = r.mean.data() + c0;
     for (Eigen::Index i = 0; i < n; ++i) {
-      const float* row = X + i * d + c0;
+      const float* row = X.Row(i);
       double* t = T.row(i).data();
       for (Eigen::Index j = 0; j < w; ++j) t[j] = double(row[j]) - double(m[j]);
       std::fill(t + w, t + padded(w), 0.0);
@@ -390,8 +322,9 @@ WidePcaResult WidePca(const float* X, Eigen::Index n, Eigen::Index d, const PcaR
     const Eigen::Index w = std::min(kWideTile, d - c0);
     std::fill(colsum.begin(), colsum.end(), 0.0);
     std::fill(colsq.begin(), colsq.end(), 0.0);
+    X.Load(c0, w);
     for (Eigen::Index i = 0; i < n; ++i) {
-      const float* row = X + i * d + c0;
+      const float* row = X.Row(i);
       for (Eigen::Index j = 0; j < w; ++j) {
         const double x = row[j];
         colsum[static_cast<std::size_t>(j)] += x;
@@ -405,7 +338,7 @@ WidePcaResult WidePca(const float* X, Eigen::Index n, Eigen::Index d, const PcaR
     if (!std::isfinite(tile_sq)) {
       for (Eigen::Index i = 0; i < n; ++i)
         for (Eigen::Index j = 0; j < w; ++j)
-          if (!std::isfinite(X[i * d + c0 + j])) {
+          if (!std::isfinite(X.Row(i)[j])) {
             r.non_finite = std::int64_t(i * d + c0 + j);
             return r;
           }
@@ -458,6 +391,7 @@ WidePcaResult WidePca(const float* X, Eigen::Index n, Eigen::Index d, const PcaR
   for (Eigen::Index c0 = 0; c0 < d && (c > 0 || sink); c0 += kWideTile) {
     const Eigen::Index w = std::min(kWideTile, d - c0);
     if (c > 0) {
+      X.Load(c0, w);
       load_centred(c0, w, nullptr);
       BasisProduct(S.data(), c, n, T.data(), kWideTile, padded(w), Bd.data(), kWideTile, gram.isa());
       Bf.leftCols(w) = Bd.leftCols(w).cast<float>();
@@ -476,6 +410,97 @@ WidePcaResult WidePca(const float* X, Eigen::Index n, Eigen::Index d, const PcaR
   r.weights.assign(W.data(), W.data() + W.size());
   NormalizeSigns(r.basis.data(), c, d, r.weights.data(), n);
   return r;
+}
+
+}  // namespace
+
+PcaResult Pca(const PcaRows& X, const PcaRequest& q, const RowMatrixXf* start) {
+  const Eigen::Index n = X.rows, d = X.cols;
+  PcaResult r;
+  r.requested = q.max_components;
+  // n observations span at most n - 1 centered directions.
+  const int limit = static_cast<int>(std::min<Eigen::Index>(n - 1, d));
+  r.clamped_to = limit;
+  const Eigen::Index small = std::min(n, d);
+  const int want = std::min(q.max_components, limit);
+  if (!(small <= q.gram_limit || 2 * (want + q.oversampling) >= small))
+    return RandomizedPca(X, std::move(r), q, start, limit);
+  if (n > d) {  // d <= gram_limit (or barely above the sketch): all rows at once
+    RowMatrixXf Xc(n, d);
+    X.get(0, n, Xc.data());
+    Center(Xc, r, Xc);  // in place
+    return CovariancePca(Xc, std::move(r), q, limit);
+  }
+  // The Gram path is WidePca's: by column tiles where the rows give them, else on all rows at once.
+  WidePcaResult w;
+  if (X.get_columns) {
+    WideTiles tiles(X);
+    w = WidePcaOf(tiles, n, d, q, false, {}, KernelIsa::kAuto);
+  } else {
+    RowMatrixXf A(n, d);
+    X.get(0, n, A.data());
+    WideTiles tiles(A.data(), d);
+    w = WidePcaOf(tiles, n, d, q, false, {}, KernelIsa::kAuto);
+  }
+  BTF_CHECK(w.non_finite < 0);  // callers check that X is finite
+  const Eigen::Index c = w.components;
+  r.mean = Eigen::Map<const Eigen::VectorXf>(w.mean.data(), d);
+  r.basis = Eigen::Map<const RowMatrixXf>(w.basis.data(), c, d);
+  r.scores = Eigen::Map<const RowMatrixXf>(w.weights.data(), n, c);
+  r.eigenvalues = std::move(w.eigenvalues);
+  r.total_energy = w.total_energy;
+  r.centered_energy = w.centered_energy;
+  r.residual_energy = w.residual_energy;
+  r.dropped_null = w.dropped_null;
+  return r;
+}
+
+PcaResult Pca(const Eigen::Ref<const RowMatrixXf>& X, const PcaRequest& q, const RowMatrixXf* start) {
+  const PcaRows rows{X.rows(), X.cols(),
+                     [&](Eigen::Index first, Eigen::Index count, float* out) {
+                       Eigen::Map<RowMatrixXf>(out, count, X.cols()) = X.middleRows(first, count);
+                     },
+                     [&](Eigen::Index c0, Eigen::Index w, float* out, Eigen::Index stride) {
+                       for (Eigen::Index i = 0; i < X.rows(); ++i)
+                         std::copy_n(X.row(i).data() + c0, w, out + i * stride);
+                     }};
+  return Pca(rows, q, start);
+}
+
+PcaResult PcaFullSvd(const Eigen::Ref<const RowMatrixXf>& X, int components) {
+  PcaResult r;
+  RowMatrixXf Xc;
+  Center(X, r, Xc);
+  r.requested = components;
+  const Eigen::MatrixXf xc = Xc;
+  Eigen::BDCSVD<Eigen::MatrixXf> svd(xc, Eigen::ComputeThinV);
+  const int c = static_cast<int>(std::min<Eigen::Index>(components, svd.nonzeroSingularValues()));
+  r.clamped_to = c;
+  r.basis = svd.matrixV().leftCols(c).transpose();
+  Finish(Xc, r);
+  return r;
+}
+
+float RoundToHalf(float x) { return HalfToFloat(FloatToHalf(x)); }
+
+void NormalizeSigns(float* basis, Eigen::Index c, Eigen::Index d, float* weights, Eigen::Index n) {
+  for (Eigen::Index k = 0; k < c; ++k) {
+    const float* row = basis + k * d;
+    if (d == 0) continue;
+    // The largest magnitude (vectorised), then the first entry that has it.
+    const float best = Eigen::Map<const Eigen::ArrayXf>(row, d).abs().maxCoeff();
+    Eigen::Index arg = 0;
+    while (arg + 1 < d && std::abs(row[arg]) != best) ++arg;
+    if (!(row[arg] < 0)) continue;
+    for (Eigen::Index i = 0; i < d; ++i) basis[k * d + i] = -basis[k * d + i];
+    for (Eigen::Index l = 0; l < n; ++l) weights[l * c + k] = -weights[l * c + k];
+  }
+}
+
+WidePcaResult WidePca(const float* X, Eigen::Index n, Eigen::Index d, const PcaRequest& q, bool half,
+                      const TileSink& sink, KernelIsa isa) {
+  WideTiles tiles(X, d);
+  return WidePcaOf(tiles, n, d, q, half, sink, isa);
 }
 
 }  // namespace btf

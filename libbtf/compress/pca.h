@@ -61,19 +61,28 @@ PcaResult Pca(const Eigen::Ref<const RowMatrixXf>& X, const PcaRequest& request,
 
 // The randomized path over PcaRows holds blocks of this many rows (the last one shorter), one at
 // a time, in row order, once per pass; it asks for them in runs of a few rows.
-inline constexpr Eigen::Index kPcaBlockRows = 128;
+inline constexpr Eigen::Index kPcaBlockRows = 64;
 
 // An n x d matrix (rows x cols) whose rows get(first, count, out) writes as float to out
-// (count x d, row-major): e.g. gathered from a larger matrix, converted from half.
+// (count x d, row-major): e.g. gathered from a larger matrix, converted from half. Optionally
+// get_columns(c0, w, out, stride) writes columns [c0, c0 + w) of every row (n x w, row stride
+// `stride`), for the Gram path to read a tile of columns at a time. Optionally `block`: room for
+// kPcaBlockRows x cols floats, where the randomized path reads its blocks (a caller's buffer,
+// reused over many calls), else it allocates its own.
 struct PcaRows {
+  using Columns = std::function<void(Eigen::Index c0, Eigen::Index w, float* out, Eigen::Index stride)>;
   Eigen::Index rows = 0, cols = 0;
   std::function<void(Eigen::Index first, Eigen::Index count, float* out)> get;
+  Columns get_columns;
+  float* block = nullptr;
 };
 
 // The same result as Pca on the matrix the rows make up, holding what each path needs: the
-// Gram paths (min(n, d) <= gram_limit, or barely above the sketch's c + oversampling) all rows
-// at once as float; the randomized path one block of kPcaBlockRows rows, its sketches
-// (n x (c + oversampling) and d x (c + oversampling)) and the scores, never the n x d matrix.
+// Gram path (n <= d, n <= gram_limit or barely above the sketch's c + oversampling) is WidePca's
+// (below), over tiles of kWideTile columns with get_columns, else over all rows at once as float;
+// the covariance path (d < n, d small) all rows at once; the randomized path one block of
+// kPcaBlockRows rows, its sketches (n x (c + oversampling) and d x (c + oversampling)) and the
+// scores, never the n x d matrix.
 PcaResult Pca(const PcaRows& X, const PcaRequest& request, const RowMatrixXf* start = nullptr);
 
 // The straightforward reference: full SVD (Eigen::BDCSVD) of the centered matrix, first c

@@ -1,9 +1,13 @@
 #include "libbtf/core/memory.h"
 
 #include <cstdint>
+#include <new>
 
 #if defined(__linux__)
 #include <sys/mman.h>
+#endif
+#if defined(__GLIBC__)
+#include <malloc.h>
 #endif
 
 namespace btf {
@@ -17,6 +21,43 @@ void AdviseHugePages(void* data, std::size_t bytes) {
 #else
   (void)data, (void)bytes;
 #endif
+}
+
+void ReleaseFreeHeap() {
+#if defined(__GLIBC__)
+  malloc_trim(0);
+#endif
+}
+
+PageBuffer& PageBuffer::operator=(PageBuffer&& o) noexcept {
+  if (this != &o) {
+    this->~PageBuffer();
+    data_ = o.data_, bytes_ = o.bytes_;
+    o.data_ = nullptr, o.bytes_ = 0;
+  }
+  return *this;
+}
+
+PageBuffer::~PageBuffer() {
+#if defined(__linux__)
+  if (data_) munmap(data_, bytes_);
+#else
+  ::operator delete(data_);
+#endif
+}
+
+void PageBuffer::Reserve(std::size_t bytes) {
+  if (bytes <= bytes_) return;
+  this->~PageBuffer();
+  data_ = nullptr, bytes_ = 0;
+#if defined(__linux__)
+  void* p = mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+  if (p == MAP_FAILED) throw std::bad_alloc();
+  AdviseHugePages(p, bytes);
+#else
+  void* p = ::operator new(bytes);
+#endif
+  data_ = p, bytes_ = bytes;
 }
 
 }  // namespace btf

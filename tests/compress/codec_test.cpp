@@ -168,48 +168,67 @@ TEST(Pca, WarmStartFromAPreviousFitLosesLittle) {
   EXPECT_LT((g - Eigen::MatrixXf::Identity(8, 8)).cwiseAbs().maxCoeff(), 1e-5);
 }
 
-TEST(Pca, RowsInBlocksGiveTheSameBytesAndTheRandomizedPathHoldsOneBlock) {
+TEST(Pca, RowsInBlocksGiveTheSameBytesAndHoldOneBlockOrOneTile) {
   // LPCA's call: a cluster's member rows gathered from the texel matrix as PcaRows. The same
   // cluster-shaped matrix (8 strong directions over 1 % noise, around a mean), 300 members taken
   // from every other row of a 600-row matrix; c = 8, LPCA's default gram_limit (randomized for
   // 300 rows, the Gram for 200).
   const RowMatrixXf big = ClusterShaped(600, 5);
+  const Eigen::Index d = big.cols();
   PcaRequest q;
   q.max_components = 8;
   for (const Eigen::Index n : {300, 200}) {
-    RowMatrixXf X(n, big.cols());
+    RowMatrixXf X(n, d);
     for (Eigen::Index i = 0; i < n; ++i) X.row(i) = big.row(2 * i);
-    // Every request: it must be in row order, one block after the other.
-    Eigen::Index largest = 0, requested = 0, next = 0;
+    // Every request: rows in row order, one block after the other; tiles of columns in order.
+    Eigen::Index largest = 0, requested = 0, next = 0, widest = 0, tiles = 0, next_col = 0;
     bool in_order = true;
-    const PcaRows rows{n, big.cols(), [&](Eigen::Index first, Eigen::Index count, float* out) {
-                         in_order = in_order && first == next;
-                         next = first + count == n ? 0 : first + count;
-                         largest = std::max(largest, count), requested += count;
-                         for (Eigen::Index i = 0; i < count; ++i)
-                           Eigen::Map<Eigen::RowVectorXf>(out + i * big.cols(), big.cols()) = big.row(2 * (first + i));
-                       }};
-    for (const bool warm : {false, true}) {
-      const PcaResult cold = Pca(X, q);
-      const RowMatrixXf* start = warm ? &cold.basis : nullptr;
-      largest = requested = next = 0;
-      const PcaResult whole = Pca(X, q, start), blocks = Pca(rows, q, start);
-      EXPECT_EQ(blocks.randomized, n == 300);
-      EXPECT_EQ(blocks.basis, whole.basis) << n << " rows, warm " << warm;
-      EXPECT_EQ(blocks.scores, whole.scores);
-      EXPECT_EQ(blocks.mean, whole.mean);
-      EXPECT_EQ(blocks.residual_energy, whole.residual_energy);
-      EXPECT_TRUE(in_order);
-      if (n == 300) {
-        // At most one block at a time (read in runs of a few rows); the passes: the moments with
-        // Z = Xc^T Xc Omega, one per subspace iteration (2 cold, 1 warm), the final Y = Xc V.
-        EXPECT_LE(largest, kPcaBlockRows);
-        EXPECT_EQ(requested, n * (warm ? 3 : 4));
-      } else {
-        EXPECT_EQ(largest, n);  // the Gram path: all rows at once, once
-        EXPECT_EQ(requested, n);
+    PcaRows rows{n, d,
+                 [&](Eigen::Index first, Eigen::Index count, float* out) {
+                   in_order = in_order && first == next;
+                   next = first + count == n ? 0 : first + count;
+                   largest = std::max(largest, count), requested += count;
+                   for (Eigen::Index i = 0; i < count; ++i)
+                     Eigen::Map<Eigen::RowVectorXf>(out + i * d, d) = big.row(2 * (first + i));
+                 },
+                 [&](Eigen::Index c0, Eigen::Index w, float* out, Eigen::Index stride) {
+                   in_order = in_order && c0 == next_col;
+                   next_col = c0 + w == d ? 0 : c0 + w;
+                   widest = std::max(widest, w), ++tiles;
+                   for (Eigen::Index i = 0; i < n; ++i)
+                     Eigen::Map<Eigen::RowVectorXf>(out + i * stride, w) = big.row(2 * i).segment(c0, w);
+                 }};
+    for (const bool warm : {false, true})
+      for (const bool columns : {true, false}) {
+        const PcaResult cold = Pca(X, q);
+        const RowMatrixXf* start = warm ? &cold.basis : nullptr;
+        PcaRows given = rows;
+        if (!columns) given.get_columns = nullptr;
+        largest = requested = next = widest = tiles = next_col = 0;
+        const PcaResult whole = Pca(X, q, start), blocks = Pca(given, q, start);
+        EXPECT_EQ(blocks.randomized, n == 300);
+        EXPECT_EQ(blocks.basis, whole.basis) << n << " rows, warm " << warm << ", columns " << columns;
+        EXPECT_EQ(blocks.scores, whole.scores);
+        EXPECT_EQ(blocks.mean, whole.mean);
+        EXPECT_EQ(blocks.residual_energy, whole.residual_energy);
+        EXPECT_TRUE(in_order);
+        if (n == 300) {
+          // At most one block at a time (read in runs of a few rows); the passes: the moments with
+          // Z = Xc^T Xc Omega, one per subspace iteration (2 cold, 1 warm), the final Y = Xc V.
+          EXPECT_LE(largest, kPcaBlockRows);
+          EXPECT_EQ(requested, n * (warm ? 3 : 4));
+          EXPECT_EQ(tiles, 0);
+        } else if (columns) {
+          // The Gram path by tiles: no row, each tile of kWideTile columns (the last shorter) once
+          // per pass (the Gram, then the basis).
+          EXPECT_EQ(requested, 0);
+          EXPECT_LE(widest, kWideTile);
+          EXPECT_EQ(tiles, 2 * ((d + kWideTile - 1) / kWideTile));
+        } else {
+          EXPECT_EQ(largest, n);  // the Gram path without tiles: all rows at once, once
+          EXPECT_EQ(requested, n);
+        }
       }
-    }
   }
 }
 
