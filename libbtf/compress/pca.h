@@ -61,7 +61,7 @@ PcaResult Pca(const Eigen::Ref<const RowMatrixXf>& X, const PcaRequest& request,
 
 // The randomized path over PcaRows holds blocks of this many rows (the last one shorter), one at
 // a time, in row order, once per pass; it asks for them in runs of a few rows.
-inline constexpr Eigen::Index kPcaBlockRows = 64;
+inline constexpr Eigen::Index kPcaBlockRows = 128;
 
 // An n x d matrix (rows x cols) whose rows get(first, count, out) writes as float to out
 // (count x d, row-major): e.g. gathered from a larger matrix, converted from half. Optionally
