@@ -31,25 +31,28 @@ void ReleaseFreeHeap() {
 
 PageBuffer& PageBuffer::operator=(PageBuffer&& o) noexcept {
   if (this != &o) {
-    this->~PageBuffer();
+    Release();
     data_ = o.data_, bytes_ = o.bytes_;
     o.data_ = nullptr, o.bytes_ = 0;
   }
   return *this;
 }
 
-PageBuffer::~PageBuffer() {
+PageBuffer::~PageBuffer() { Release(); }
+
+void PageBuffer::Release() noexcept {
+  if (!data_) return;
 #if defined(__linux__)
-  if (data_) munmap(data_, bytes_);
+  munmap(data_, bytes_);
 #else
   ::operator delete(data_);
 #endif
+  data_ = nullptr, bytes_ = 0;
 }
 
 void PageBuffer::Reserve(std::size_t bytes) {
   if (bytes <= bytes_) return;
-  this->~PageBuffer();
-  data_ = nullptr, bytes_ = 0;
+  Release();
 #if defined(__linux__)
   void* p = mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
   if (p == MAP_FAILED) throw std::bad_alloc();

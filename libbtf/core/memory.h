@@ -41,6 +41,7 @@ class PageBuffer {
 
  private:
   void Reserve(std::size_t bytes);
+  void Release() noexcept;
   void* data_ = nullptr;
   std::size_t bytes_ = 0;
 };
