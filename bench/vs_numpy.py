@@ -14,7 +14,10 @@ already in memory (the read is not counted for them):
   LPCA, k = 32, c = 8: sklearn.cluster.KMeans (k-means++, Lloyd to convergence, one init) on the
     texel-major matrix, then Kambhatla-Leen local PCA: sklearn.decomposition.PCA per cluster,
     each texel reassigned to the cluster that reconstructs it best, `ROUNDS` rounds, final fit.
-Errors are relative L2 over the whole BTF, ||X - X'||_F / ||X||_F, the definition our summary uses.
+Per-view PCA takes a second or so on each side, where the machine's noise is a large share: each side
+is timed REPS times (default 3) and its fastest run counts. LPCA (tens of seconds for theirs) is
+timed once. Errors are relative L2 over the whole BTF, ||X - X'||_F / ||X||_F, the definition our
+summary uses.
 Both sides use both cores (OpenMP for ours, OpenBLAS threads for NumPy). Prints one table.
 
 A fair peer (bench/peer_env.py): the script re-executes itself without OPENBLAS_CORETYPE and
@@ -36,6 +39,7 @@ UNSET = fair_environment()  # before NumPy loads its BLAS: a peer slowed by thes
 import numpy as np  # noqa: E402
 
 ROUNDS = 2
+REPS = int(os.environ.get("REPS", "3"))  # per-view PCA: the fastest of this many runs on each side
 
 
 def numpy_gemm_rate(n=1024, seconds=2.0):
@@ -84,21 +88,23 @@ def main():
     rows = []
 
     with tempfile.TemporaryDirectory() as tmp:
-        t = time.perf_counter()
-        ours = libbtf.compress(path, os.path.join(tmp, "pv.h5"), method="pca-view", components=16)
-        ours_s = time.perf_counter() - t
+        ours_s = theirs_s = float("inf")
+        for _ in range(REPS):
+            t = time.perf_counter()
+            ours = libbtf.compress(path, os.path.join(tmp, "pv.h5"), method="pca-view", components=16)
+            ours_s = min(ours_s, time.perf_counter() - t)
 
-        t = time.perf_counter()
-        err = 0.0
-        for v in range(V):
-            X = data[v].reshape(L, -1)
-            Xc = X - X.mean(axis=0, keepdims=True)
-            U, S, Vt = np.linalg.svd(Xc, full_matrices=False)
-            R = Xc - (U[:, :16] * S[:16]) @ Vt[:16]
-            err += float(np.sum(R.astype(np.float64) ** 2))
-        theirs_s = time.perf_counter() - t
-        rows.append(("per-view PCA c=16", "numpy.linalg.svd per view", ours_s, ours["relative_error"], theirs_s,
-                     np.sqrt(err / total)))
+            t = time.perf_counter()
+            err = 0.0
+            for v in range(V):
+                X = data[v].reshape(L, -1)
+                Xc = X - X.mean(axis=0, keepdims=True)
+                U, S, Vt = np.linalg.svd(Xc, full_matrices=False)
+                R = Xc - (U[:, :16] * S[:16]) @ Vt[:16]
+                err += float(np.sum(R.astype(np.float64) ** 2))
+            theirs_s = min(theirs_s, time.perf_counter() - t)
+        rows.append(("per-view PCA c=16", f"numpy.linalg.svd per view, best of {REPS}", ours_s,
+                     ours["relative_error"], theirs_s, np.sqrt(err / total)))
 
         t = time.perf_counter()
         ours = libbtf.compress(path, os.path.join(tmp, "lpca.h5"), method="lpca", clusters=32, components=8)
