@@ -76,13 +76,7 @@ class TexelMatrix {
   // out[0, cols()) = row i, as float.
   void CopyRow(std::size_t i, float* out) const { CopyRows(i, 1, out); }
   // out[0, w) = row i's columns [c0, c0 + w), as float.
-  void CopyRowPart(std::size_t i, std::size_t c0, std::size_t w, float* out) const {
-    const std::size_t at = i * cols() + c0;
-    if (half_)
-      HalvesToFloats(reinterpret_cast<const std::uint16_t*>(h_.data()) + at, out, w);
-    else
-      std::copy_n(f_.data() + at, w, out);
-  }
+  void CopyRowPart(std::size_t i, std::size_t c0, std::size_t w, float* out) const { CopyValues(i * cols() + c0, w, out); }
   // X = rows [first, first + count), as float, in the calling thread's scratch buffer.
   Eigen::Map<RowMatrixXf> Rows(std::size_t first, std::size_t count, ThreadPageBuffers& scratch) const {
     Eigen::Map<RowMatrixXf> X(scratch.Get<float>(count * cols()), static_cast<Eigen::Index>(count),
@@ -94,10 +88,11 @@ class TexelMatrix {
   decltype(auto) Visit(F&& f) const { return half_ ? f(h_) : f(f_); }
 
  private:
-  void CopyRows(std::size_t first, std::size_t count, float* out) const {
-    const std::size_t n = count * cols();
-    if (half_) HalvesToFloats(reinterpret_cast<const std::uint16_t*>(h_.data()) + first * cols(), out, n);
-    else std::copy_n(f_.data() + first * cols(), n, out);
+  void CopyRows(std::size_t first, std::size_t count, float* out) const { CopyValues(first * cols(), count * cols(), out); }
+  // out[0, n) = the n values from row-major index `at`, as float.
+  void CopyValues(std::size_t at, std::size_t n, float* out) const {
+    if (half_) HalvesToFloats(reinterpret_cast<const std::uint16_t*>(h_.data()) + at, out, n);
+    else std::copy_n(f_.data() + at, n, out);
   }
 
   bool half_ = true;
@@ -468,8 +463,8 @@ class LpcaFitter : public LpcaPhase {
 
   // Per-cluster PCA on the current assignment; empty clusters re-seeded from the worst texels. A
   // cluster whose members are those it had in `prev` takes prev's PCA (the same rows in the same
-  // order: its fit), moved, not copied: those clusters are returned, for KeepPrevious to move
-  // back. warm (with o_.lpca.warm_start): per cluster, the model whose basis starts its PCA (Pca's
+  // order: its fit), moved, not copied: those clusters are returned, for Iterate to move back
+  // where the new fit is not better. warm (with o_.lpca.warm_start): per cluster, the model whose basis starts its PCA (Pca's
   // `start`; none where it has no components); release_warm: each freed once its cluster is fitted.
   std::vector<int> FitClusters(ClusterFit& f, bool have_residuals, ClusterFit* prev, std::vector<PcaResult>* warm,
                                bool release_warm = false);
